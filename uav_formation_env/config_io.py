@@ -1,0 +1,156 @@
+"""Scenario <-> dict / YAML, strict about keys, and the registry of named scenarios.
+
+``scenario_from_dict`` rejects unknown keys by their dotted path (``observer.lamda2`` is an error, not
+a silently ignored typo) and re-runs every validation rule of :mod:`uav_formation_env.config`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Union
+
+import yaml
+
+from uav_formation_env.config import Scenario
+
+_T = typing.TypeVar("_T")
+
+
+def to_dict(obj: Any) -> Any:
+    """Plain-data (dict/list/float) form of a config dataclass, fit for YAML or JSON."""
+    if dataclasses.is_dataclass(obj):
+        return {f.name: to_dict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, tuple | list):
+        return [to_dict(item) for item in obj]
+    return obj
+
+
+def _convert(value: Any, hint: Any, path: str) -> Any:
+    origin = typing.get_origin(hint)
+    if dataclasses.is_dataclass(hint):
+        return _build(hint, value, path)
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ValueError(f"invalid scenario field '{path}': expected a list, got {value!r}")
+        args = typing.get_args(hint)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(item, args[0], path) for item in value)
+        if len(value) != len(args):
+            raise ValueError(
+                f"invalid scenario field '{path}': expected {len(args)} entries, got {len(value)}"
+            )
+        return tuple(_convert(item, arg, path) for item, arg in zip(value, args))
+    if origin in (Union, types.UnionType):
+        return value
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ValueError(f"invalid scenario field '{path}': expected true/false, got {value!r}")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"invalid scenario field '{path}': expected an integer, got {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(f"invalid scenario field '{path}': expected a number, got {value!r}")
+        return float(value)
+    if hint is str:
+        if not isinstance(value, str):
+            raise ValueError(f"invalid scenario field '{path}': expected a string, got {value!r}")
+        return value
+    return value
+
+
+def _build(cls: type[_T], data: Any, path: str) -> _T:
+    if isinstance(data, cls):
+        return data
+    if not isinstance(data, Mapping):
+        where = path or "scenario"
+        raise ValueError(f"invalid scenario field '{where}': expected a mapping, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    unknown = sorted(set(data) - names)
+    if unknown:
+        dotted = ", ".join(f"'{path + '.' if path else ''}{key}'" for key in unknown)
+        raise ValueError(f"unknown scenario key {dotted}; allowed here: {sorted(names)}")
+    kwargs = {
+        key: _convert(value, hints[key], f"{path + '.' if path else ''}{key}")
+        for key, value in data.items()
+    }
+    return cls(**kwargs)
+
+
+def scenario_from_dict(data: Mapping[str, Any]) -> Scenario:
+    """Build a validated scenario; missing keys take the paper's defaults."""
+    return _build(Scenario, data, "")
+
+
+def _merge(base: dict[str, Any], patch: Mapping[str, Any], path: str) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in patch.items():
+        dotted = f"{path}.{key}" if path else key
+        if key not in merged:
+            raise ValueError(f"unknown scenario key '{dotted}'; allowed here: {sorted(merged)}")
+        if isinstance(value, Mapping) and isinstance(merged[key], dict):
+            merged[key] = _merge(merged[key], value, dotted)
+        else:
+            merged[key] = to_dict(value)
+    return merged
+
+
+def with_overrides(scenario: Scenario, overrides: Mapping[str, Any]) -> Scenario:
+    """A copy of ``scenario`` with single fields changed, validated like a new scenario.
+
+    Keys may be nested mappings (``{"observer": {"enabled": False}}``), dotted paths
+    (``"observer.enabled"``) or double-underscore paths (``observer__enabled``, for keyword use).
+    """
+    patch: dict[str, Any] = {}
+    for key, value in overrides.items():
+        parts = key.replace("__", ".").split(".")
+        node = patch
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+    return scenario_from_dict(_merge(to_dict(scenario), patch, ""))
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Read a scenario from a YAML file (missing keys default to the paper's values)."""
+    with open(path, encoding="utf-8") as stream:
+        data = yaml.safe_load(stream) or {}
+    return scenario_from_dict(data)
+
+
+def save_scenario(scenario: Scenario, path: str | Path) -> None:
+    """Write every field of a scenario to a YAML file."""
+    with open(path, "w", encoding="utf-8") as stream:
+        yaml.safe_dump(to_dict(scenario), stream, sort_keys=False)
+
+
+def paper_scenario() -> Scenario:
+    """The paper's scenario (SPEC §8): 5 UAVs, V formation, two obstacles, 200 s."""
+    return Scenario()
+
+
+SCENARIOS: dict[str, typing.Callable[[], Scenario]] = {"paper": paper_scenario}
+
+
+def resolve_scenario(scenario: str | Path | Scenario | Mapping[str, Any] = "paper") -> Scenario:
+    """A scenario object from a registered name, a YAML path, a mapping or a scenario."""
+    if isinstance(scenario, Scenario):
+        return scenario
+    if isinstance(scenario, Mapping):
+        return scenario_from_dict(scenario)
+    if isinstance(scenario, str) and scenario in SCENARIOS:
+        return SCENARIOS[scenario]()
+    path = Path(scenario)
+    if path.suffix in (".yaml", ".yml") and path.is_file():
+        return load_scenario(path)
+    raise ValueError(
+        f"unknown scenario {str(scenario)!r}: expected one of {sorted(SCENARIOS)}, "
+        "a path to an existing .yaml file, or a Scenario"
+    )

@@ -1,0 +1,130 @@
+"""Non-singular fast terminal sliding-mode disturbance observer, NFTSMO (SPEC §3).
+
+The 6-dimensional observer of eq. 10 splits into independent scalar channels; the position channels
+carry no disturbance, so three scalar observers run on the velocity, ``e = v - v_hat``. Per inner
+tick of length ``h`` (finite-difference form, SPEC §3.3), elementwise:
+
+    e = v - v_hat;   e' = (e - e_prev) / h
+    s = e + Π1 sig^λ1(e) + Π2 sig^λ2(e')
+    v_hat += h (u + s0 + d_hat)
+    s0    += h (1 + Π1 λ1 |e|^(λ1-1)) sig^(2-λ2)(e') / (Π2 λ2)
+    d_hat += h (η sign(s) + ρ s)            [literal option: (η + ρ) sign(s)]
+
+``sig^a(x) = |x|^a sign(x)``. The disturbance estimate is the total injection ``d_hat + s0``
+(``estimate_without_s0`` uses ``d_hat`` alone) and the compensation is ``u_d = -estimate``
+(SPEC §3.4: the paper's ``+B⁺ d_hat`` doubles the disturbance).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from uav_formation_env.config import ObserverConfig
+
+
+@dataclass
+class ObserverState:
+    """Observer state, every array (..., 3): v_hat [m/s], s0 and d_hat [m/s^2], e_prev [m/s]."""
+
+    v_hat: np.ndarray
+    s0: np.ndarray
+    d_hat: np.ndarray
+    e_prev: np.ndarray
+
+    def copy(self) -> ObserverState:
+        return ObserverState(self.v_hat.copy(), self.s0.copy(), self.d_hat.copy(), self.e_prev.copy())
+
+
+def observer_init(v: np.ndarray) -> ObserverState:
+    """Initial state: ``v_hat = v(0)``, zero estimates and zero previous error.
+
+    Args:
+        v: (..., 3) measured velocity [m/s].
+    """
+    zeros = np.zeros_like(v, dtype=float)
+    return ObserverState(np.array(v, dtype=float), zeros.copy(), zeros.copy(), zeros.copy())
+
+
+def _sig(x: np.ndarray, power: float) -> np.ndarray:
+    return np.abs(x) ** power * np.sign(x)
+
+
+def observer_step(
+    state: ObserverState,
+    v_ticks: np.ndarray,
+    u_applied: np.ndarray,
+    h: float,
+    config: ObserverConfig,
+) -> ObserverState:
+    """Run the observer over one control step of ``S`` inner ticks with ``u`` held.
+
+    The loop runs over inner ticks (time integration, inherently sequential); every tick works on
+    the whole batch.
+
+    Args:
+        state: current observer state, arrays (..., 3).
+        v_ticks: (S, ..., 3) measured velocity at the start of each tick [m/s].
+        u_applied: (..., 3) applied input held over the step (u_n + u_d after clipping) [m/s^2].
+        h: tick length [s].
+        config: observer gains.
+
+    Returns:
+        The new state (the input state is not modified).
+    """
+    c = config
+    v_hat, s0, d_hat, e_prev = (a.copy() for a in (state.v_hat, state.s0, state.d_hat, state.e_prev))
+    h_u = h * u_applied
+    s0_gain = h / (c.pi2 * c.lambda2)
+    switch_gain = h * (c.eta + c.rho) if c.literal_sign_law else h * c.eta
+    linear_gain = 0.0 if c.literal_sign_law else h * c.rho
+    # λ1 = 2, λ2 = 1.5 (the defaults) reduce every power to abs/sqrt: about 3x fewer ufunc calls.
+    square_root_law = c.lambda1 == 2.0 and c.lambda2 == 1.5
+    for v in v_ticks:
+        e = v - v_hat
+        e_dot = (e - e_prev) / h
+        e_prev = e
+        abs_e = np.abs(e)
+        if square_root_law:
+            root = np.sqrt(np.abs(e_dot))
+            sig_l2 = e_dot * root  # sig^1.5(e')
+            sig_2ml2 = np.sign(e_dot) * root  # sig^0.5(e')
+            slope = abs_e  # |e|^(λ1 - 1)
+        else:
+            sig_l2 = _sig(e_dot, c.lambda2)
+            sig_2ml2 = _sig(e_dot, 2.0 - c.lambda2)
+            slope = abs_e ** (c.lambda1 - 1.0)
+        # e + Π1 sig^λ1(e) = e (1 + Π1 |e|^(λ1-1))
+        surface = e * (1.0 + c.pi1 * slope) + c.pi2 * sig_l2
+        v_hat += h_u + h * (s0 + d_hat)
+        s0 += (s0_gain + (s0_gain * c.pi1 * c.lambda1) * slope) * sig_2ml2
+        d_hat += switch_gain * np.sign(surface)
+        if linear_gain:
+            d_hat += linear_gain * surface
+    return ObserverState(v_hat, s0, d_hat, e_prev)
+
+
+def disturbance_estimate(state: ObserverState, config: ObserverConfig) -> np.ndarray:
+    """Estimate of the disturbance, (..., 3) [m/s^2]: ``d_hat + s0`` (or ``d_hat`` if literal)."""
+    if config.estimate_without_s0:
+        return state.d_hat.copy()
+    return state.d_hat + state.s0
+
+
+def compensation(state: ObserverState, config: ObserverConfig) -> np.ndarray:
+    """Feed-forward input that cancels the estimate, ``u_d = -estimate``, (..., 3) [m/s^2]."""
+    return -disturbance_estimate(state, config)
+
+
+def tick_velocities(v0: np.ndarray, a: np.ndarray, dt: float, substeps: int) -> np.ndarray:
+    """Velocity at the start of each inner tick with ``a`` held (exact), (S, ..., 3) [m/s].
+
+    Args:
+        v0: (..., 3) velocity at the start of the control step [m/s].
+        a: (..., 3) held total acceleration u + d [m/s^2].
+        dt: control step [s].
+        substeps: S.
+    """
+    fractions = np.arange(substeps, dtype=float).reshape((substeps,) + (1,) * v0.ndim)
+    return v0 + fractions * (dt / substeps) * a

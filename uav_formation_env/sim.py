@@ -1,0 +1,301 @@
+"""``FormationSim``: B copies of a scenario stepped together on the batched core.
+
+The simulator owns the state (UAV states, observer, gusts, topology, time, random streams) and
+composes the pure core functions; it holds no formula of its own. Each copy has its own
+``np.random.Generator`` seeded at reset, and draws its disturbance noise in fixed blocks of
+:data:`NOISE_BLOCK` steps, so copy ``b`` of a batch reproduces a one-copy simulation seeded alike bit
+for bit, whatever B is and whenever other copies reset.
+
+Order of one control step (SPEC §1.4, §3.3, §3.4, §7):
+
+1. ``u_n`` clipped to ±u_max; ``u_d = -(d_hat + s0)`` if the observer is on, else 0;
+   applied ``u = clip(u_n + u_d, ±u_max)``.
+2. Disturbance ``d`` of the step (held), ``a = u + d``.
+3. Observer over its inner ticks on the exact velocity samples; plant ZOH step over δ.
+4. ``t += δ``; topology update at the new positions (adjacency, groups, reference velocity).
+5. Stage cost of J_i at the new state with the applied ``u_n`` (the reward is minus its total).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, is_dataclass, replace
+
+import numpy as np
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.core import topology
+from uav_formation_env.core.cost import CostTerms, stage_cost
+from uav_formation_env.core.disturbances import Disturbance
+from uav_formation_env.core.dynamics import zoh_step
+from uav_formation_env.core.observer import (
+    ObserverState,
+    compensation,
+    disturbance_estimate,
+    observer_init,
+    observer_step,
+    tick_velocities,
+)
+
+NOISE_BLOCK = 100  # control steps of disturbance noise drawn per Generator call
+
+SeedLike = int | Sequence[int] | None
+
+
+@dataclass
+class StepResult:
+    """What one step (or a reset) produced; arrays are batched over B copies and N UAVs."""
+
+    z: np.ndarray  # (B, N, 6) state after the step [m, m/s]
+    u_n: np.ndarray  # (B, N, 3) formation input after clipping [m/s^2]
+    u_d: np.ndarray  # (B, N, 3) observer compensation [m/s^2]
+    u_applied: np.ndarray  # (B, N, 3) clip(u_n + u_d) [m/s^2]
+    disturbance: np.ndarray  # (B, N, 3) d held over the step [m/s^2]
+    estimate: np.ndarray  # (B, N, 3) observer estimate after the step [m/s^2]
+    adjacency: np.ndarray  # (B, N, N) h_ij at the new time
+    groups: np.ndarray  # (B, N) sub-formation ids
+    reference_velocity: np.ndarray  # (B, N, 3) v^d at the new time [m/s]
+    avoiding: np.ndarray  # (B, N) following an avoidance reference
+    cost: CostTerms  # (B, N) stage terms of J_i
+    t: np.ndarray  # (B,) time after the step [s]
+    step: np.ndarray  # (B,) steps taken since reset
+    truncated: np.ndarray  # (B,) episode reached the scenario duration
+    min_separation: np.ndarray  # (B, N) distance to the nearest other UAV [m]
+    obstacle_distance: np.ndarray  # (B, N) distance to the nearest obstacle surface [m]
+    collision: np.ndarray  # (B, N) too close to a UAV or inside an obstacle
+    activated: np.ndarray  # (B, O) obstacle became active at this step
+    restored: np.ndarray  # (B, O) obstacle finished at this step
+
+
+def _seeds_for(seed: SeedLike, count: int) -> list[int | None]:
+    if seed is None:
+        return [None] * count
+    if isinstance(seed, int | np.integer):
+        return [int(seed) + b for b in range(count)]
+    seeds = [int(s) for s in seed]
+    if len(seeds) != count:
+        raise ValueError(f"expected {count} seeds (one per reset copy), got {len(seeds)}")
+    return seeds
+
+
+def _where_batch(mask: np.ndarray, new, old):
+    """Fieldwise ``where(mask)`` over the leading batch axis of two dataclasses of arrays."""
+    out = {}
+    for f in fields(old):
+        a, b = getattr(new, f.name), getattr(old, f.name)
+        if is_dataclass(b):
+            out[f.name] = _where_batch(mask, a, b)
+        else:
+            m = mask.reshape(mask.shape + (1,) * (np.ndim(b) - 1))
+            out[f.name] = np.where(m, a, b)
+    return replace(old, **out)
+
+
+class FormationSim:
+    """B scenario copies stepped together.
+
+    Args:
+        scenario: the validated scenario.
+        batch_size: number of copies B.
+    """
+
+    def __init__(self, scenario: Scenario, batch_size: int = 1) -> None:
+        if not isinstance(batch_size, int | np.integer) or batch_size < 1:
+            raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        self.scenario = scenario
+        self.batch_size = int(batch_size)
+        self.n_uav = scenario.n_uav
+        self.dt = scenario.dynamics.dt
+        self.u_max = scenario.dynamics.u_max
+        self.offsets = np.asarray(scenario.formation.offsets, dtype=float)
+        self.base_adjacency = np.asarray(scenario.formation.adjacency, dtype=float)
+        self.obstacle_centers = np.array(
+            [o.center for o in scenario.avoidance.obstacles], dtype=float
+        ).reshape(-1, 2)
+        self.obstacle_radii = np.array([o.radius for o in scenario.avoidance.obstacles])
+        self.disturbance = Disturbance(scenario.disturbance, self.n_uav, self.dt)
+        self._rngs: list[np.random.Generator] = []
+        self.last: StepResult | None = None
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> StepResult:
+        """Start new episodes in all copies, or only in those where ``mask`` is True.
+
+        Args:
+            seed: an int (copy b of the reset copies gets ``seed + b``), one seed per reset copy,
+                or None for fresh entropy.
+            mask: (B,) bool; None resets every copy (required on the first call).
+
+        Returns:
+            The :class:`StepResult` of time 0 (inputs, disturbance and cost terms are zero).
+        """
+        B, N, cfg = self.batch_size, self.n_uav, self.scenario
+        if mask is None:
+            mask = np.ones(B, dtype=bool)
+        elif self.last is None:
+            raise ValueError("the first reset must reset every copy (mask=None)")
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != (B,):
+            raise ValueError(f"mask must have shape ({B},), got {mask.shape}")
+        indices = np.flatnonzero(mask)
+        seeds = _seeds_for(seed, len(indices))
+        if mask.all():
+            self._rngs = [np.random.default_rng() for _ in range(B)]
+            self.z = np.zeros((B, N, 6))
+            self.gust = np.zeros((B, N, 3))
+            self.noise = np.zeros((B, NOISE_BLOCK, N, self.disturbance.noise_dim))
+            self.noise_pos = np.zeros(B, dtype=np.int64)
+            self.t = np.zeros(B)
+            self.steps = np.zeros(B, dtype=np.int64)
+            self.observer = observer_init(self.z[..., 3:])
+            self.topology = topology.init_topology(B, N, len(self.obstacle_centers))
+        low = np.asarray(cfg.initial.position_low)
+        high = np.asarray(cfg.initial.position_high)
+        for b, s in zip(indices, seeds):
+            rng = np.random.default_rng(s)
+            self._rngs[b] = rng
+            self.z[b, :, :3] = low + (high - low) * rng.random((N, 3))
+            self.z[b, :, 3:] = cfg.initial.velocity
+            self.gust[b] = self.disturbance.initial_gust(rng)
+            self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)
+        self.noise_pos[mask] = 0
+        self.t[mask] = 0.0
+        self.steps[mask] = 0
+        self.observer = _where_batch(mask, observer_init(self.z[..., 3:]), self.observer)
+        self.topology = topology.reset_topology(self.topology, mask)
+        zeros = np.zeros((B, N, 3))
+        result = self._finish(mask, zeros, zeros, zeros, zeros)
+        if self.last is not None and not mask.all():
+            result = _where_batch(mask, result, self.last)
+        self.last = result
+        return result
+
+    # ------------------------------------------------------------------ step
+    def step(self, u_n: np.ndarray) -> StepResult:
+        """Advance every copy by one control step δ.
+
+        Args:
+            u_n: (B, N, 3) formation input [m/s^2]; finite values, clipped to ±u_max.
+
+        Returns:
+            The :class:`StepResult` after the step.
+        """
+        if self.last is None:
+            raise RuntimeError("call reset() before step()")
+        u_n = np.asarray(u_n, dtype=float)
+        expected = (self.batch_size, self.n_uav, 3)
+        if u_n.shape != expected:
+            raise ValueError(f"u_n must have shape {expected}, got {u_n.shape}")
+        if not np.isfinite(u_n).all():
+            raise ValueError("u_n contains NaN or infinite values")
+        obs_cfg = self.scenario.observer
+        u_n = np.clip(u_n, -self.u_max, self.u_max)
+        u_d = compensation(self.observer, obs_cfg) if obs_cfg.enabled else np.zeros_like(u_n)
+        u = np.clip(u_n + u_d, -self.u_max, self.u_max)
+        noise = self.noise[np.arange(self.batch_size), self.noise_pos]
+        d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust)
+        a = u + d
+        if obs_cfg.enabled:
+            ticks = tick_velocities(self.z[..., 3:], a, self.dt, obs_cfg.substeps)
+            self.observer = observer_step(
+                self.observer, ticks, u, self.dt / obs_cfg.substeps, obs_cfg
+            )
+        self.z = zoh_step(self.z, a, self.dt)
+        self.steps += 1
+        self.t = self.steps * self.dt  # no drift from repeated addition
+        self._advance_noise()
+        result = self._finish(np.ones(self.batch_size, dtype=bool), u_n, u_d, u, d)
+        self.last = result
+        return result
+
+    def _advance_noise(self) -> None:
+        self.noise_pos += 1
+        for b in np.flatnonzero(self.noise_pos >= NOISE_BLOCK):
+            self.noise[b] = self.disturbance.draw_noise(self._rngs[b], NOISE_BLOCK)
+            self.noise_pos[b] = 0
+
+    def _finish(
+        self, mask: np.ndarray, u_n: np.ndarray, u_d: np.ndarray, u: np.ndarray, d: np.ndarray
+    ) -> StepResult:
+        """Topology update at the current time (only in ``mask`` copies), costs and distances."""
+        cfg = self.scenario
+        new_topology, out = topology.update_topology(
+            self.topology,
+            self.z[..., :3],
+            self.z[..., 3:],
+            self.t,
+            cfg.avoidance,
+            cfg.schedule,
+            self.base_adjacency,
+        )
+        self.topology = new_topology if mask.all() else _where_batch(mask, new_topology, self.topology)
+        cost = stage_cost(
+            self.z,
+            u_n,
+            out.reference_velocity,
+            out.adjacency,
+            self.offsets,
+            cfg.cost,
+            cfg.formation.mirrored_offsets,
+        )
+        separation, obstacle_distance = self.distances()
+        collision = (separation < cfg.collision.uav_distance) | (obstacle_distance < 0.0)
+        estimate = (
+            disturbance_estimate(self.observer, cfg.observer)
+            if cfg.observer.enabled
+            else np.zeros_like(d)
+        )
+        return StepResult(
+            z=self.z.copy(),
+            u_n=u_n,
+            u_d=u_d,
+            u_applied=u,
+            disturbance=d,
+            estimate=estimate,
+            adjacency=out.adjacency,
+            groups=out.groups,
+            reference_velocity=out.reference_velocity,
+            avoiding=out.avoiding,
+            cost=cost,
+            t=self.t.copy(),
+            step=self.steps.copy(),
+            truncated=self.steps >= cfg.n_steps,
+            min_separation=separation,
+            obstacle_distance=obstacle_distance,
+            collision=collision,
+            activated=out.activated,
+            restored=out.restored,
+        )
+
+    # ------------------------------------------------------------------ queries
+    def distances(self) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest-UAV distance and nearest obstacle-surface distance, each (B, N) [m].
+
+        The obstacle distance is +inf without obstacles and negative inside an obstacle.
+        """
+        p = self.z[..., :3]
+        diff = p[:, :, None, :] - p[:, None, :, :]
+        sep = np.sqrt(np.einsum("bijk,bijk->bij", diff, diff))
+        sep[:, np.arange(self.n_uav), np.arange(self.n_uav)] = np.inf
+        if len(self.obstacle_radii) == 0:
+            surface = np.full(p.shape[:2], np.inf)
+        else:
+            centre = topology.obstacle_distances(p, self.scenario.avoidance)
+            surface = (centre - self.obstacle_radii).min(axis=-1)
+        return sep.min(axis=-1), surface
+
+    def reference_preview(self) -> np.ndarray:
+        """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held)."""
+        assert self.last is not None, "call reset() first"
+        return topology.reference_preview(
+            self.scenario.schedule,
+            self.t,
+            self.dt,
+            self.scenario.cost.horizon,
+            self.last.reference_velocity,
+            self.last.avoiding,
+        )
+
+    @property
+    def observer_state(self) -> ObserverState:
+        return self.observer
