@@ -197,9 +197,7 @@ class FormationConfig:
             "formation.adjacency",
             "entries must be 0 or 1",
         )
-        _require(
-            bool((np.diag(matrix) == 0).all()), "formation.adjacency", "diagonal must be 0"
-        )
+        _require(bool((np.diag(matrix) == 0).all()), "formation.adjacency", "diagonal must be 0")
         _require(
             has_directed_spanning_tree(matrix),
             "formation.adjacency",

@@ -1,7 +1,8 @@
 """Scenario <-> dict / YAML, strict about keys, and the registry of named scenarios.
 
-``scenario_from_dict`` rejects unknown keys by their dotted path (``observer.lamda2`` is an error, not
-a silently ignored typo) and re-runs every validation rule of :mod:`uav_formation_env.config`.
+``scenario_from_dict`` rejects unknown keys by their dotted path (``observer.lamda2`` is an
+error, not a silently ignored typo) and re-runs every validation rule of
+:mod:`uav_formation_env.config`.
 """
 
 from __future__ import annotations

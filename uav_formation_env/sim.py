@@ -3,8 +3,8 @@
 The simulator owns the state (UAV states, observer, gusts, topology, time, random streams) and
 composes the pure core functions; it holds no formula of its own. Each copy has its own
 ``np.random.Generator`` seeded at reset, and draws its disturbance noise in fixed blocks of
-:data:`NOISE_BLOCK` steps, so copy ``b`` of a batch reproduces a one-copy simulation seeded alike bit
-for bit, whatever B is and whenever other copies reset.
+:data:`NOISE_BLOCK` steps, so copy ``b`` of a batch reproduces a one-copy simulation seeded alike
+bit for bit, whatever B is and whenever other copies reset.
 
 Order of one control step (SPEC §1.4, §3.3, §3.4, §7):
 
@@ -228,7 +228,9 @@ class FormationSim:
             cfg.schedule,
             self.base_adjacency,
         )
-        self.topology = new_topology if mask.all() else _where_batch(mask, new_topology, self.topology)
+        self.topology = (
+            new_topology if mask.all() else _where_batch(mask, new_topology, self.topology)
+        )
         cost = stage_cost(
             self.z,
             u_n,

@@ -1,4 +1,4 @@
-"""The game cost J_i (eq. 6, SPEC §4): the one definition behind the env reward and the MPC objective.
+"""The game cost J_i (eq. 6, SPEC §4): one definition behind the env reward and the MPC objective.
 
 For UAV i over a horizon of H steps, with ``ε_ij(k) = (z_i(k) - z^d_i) - (ẑ_j(k) - z^d_j)``:
 
@@ -47,8 +47,8 @@ class CostTerms:
 def relative_offset_sign(mirrored: bool) -> float:
     """Sign with which z^d enters the anchored state ``a = z - sign z^d``.
 
-    ``z_ij^d = z^d_i - z^d_j`` (default) gives ``ε_ij = a_i - a_j`` with ``a = z - z^d``; the literal
-    reading ``z_ij^d = z^d_j - z^d_i`` (mirrored shape) gives ``a = z + z^d``.
+    ``z_ij^d = z^d_i - z^d_j`` (default) gives ``ε_ij = a_i - a_j`` with ``a = z - z^d``; the
+    literal reading ``z_ij^d = z^d_j - z^d_i`` (mirrored shape) gives ``a = z + z^d``.
     """
     return -1.0 if mirrored else 1.0
 
@@ -69,11 +69,12 @@ def anchored(z: np.ndarray, offsets: np.ndarray, mirrored: bool = False) -> np.n
 def formation_error_sq(own: np.ndarray, others: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
     """``Σ_j h_ij ||own_i - others_j||²`` for anchored states, without forming all pairs.
 
-    Both sides are re-centred on the receiver's first own state before expanding the square, so the
-    result has no cancellation error from absolute positions of hundreds of metres.
+    Expands the square as ``deg_i ||a_i||² - 2 a_i·Σ_j h_ij b_j + Σ_j h_ij ||b_j||²`` after moving
+    both sides to the swarm's centre (per copy), so no terms of the size of absolute positions
+    (hundreds of metres) cancel.
 
     Args:
-        own: (B, N, *extra, 6) receiver's anchored states, e.g. extra = (P, H+1).
+        own: (B, N, *extra, 6) receivers' anchored states, e.g. extra = (P, H+1).
         others: (B, N, *tail, 6) senders' anchored states, where ``tail`` are the trailing dims of
             ``extra`` (e.g. (H+1,)), or ``()``.
         adjacency: (B, N, N) h_ij, row = receiver.
@@ -81,29 +82,19 @@ def formation_error_sq(own: np.ndarray, others: np.ndarray, adjacency: np.ndarra
     Returns:
         (B, N, *extra).
     """
-    extra = own.ndim - 3
-    tail = others.ndim - 3
-    centre = own.reshape(own.shape[0], own.shape[1], -1, 6)[:, :, 0]  # (B, N, 6)
-    centre_x = centre.reshape(centre.shape[0], centre.shape[1], *(1,) * extra, 6)
-    centre_t = centre.reshape(centre.shape[0], centre.shape[1], *(1,) * tail, 6)
-    a = own - centre_x
-    degree = adjacency.sum(axis=-1)  # (B, N)
-    # Σ_j h_ij (b_j - c_i) and Σ_j h_ij ||b_j - c_i||², shapes (B, N, *tail, 6) and (B, N, *tail)
-    h_b = np.einsum("bij,bj...->bi...", adjacency, others)
-    h_bb = np.einsum("bij,bj...->bi...", adjacency, np.einsum("...k,...k->...", others, others))
-    deg_t = degree.reshape(*degree.shape, *(1,) * tail)
-    sum_rel = h_b - deg_t[..., None] * centre_t
-    sum_sq = (
-        h_bb
-        - 2.0 * np.einsum("...k,...k->...", h_b, centre_t)
-        + deg_t * np.einsum("...k,...k->...", centre_t, centre_t)
-    )
-    deg_x = degree.reshape(*degree.shape, *(1,) * extra)
+    batch, n_uav = others.shape[:2]
+    extra, tail = own.ndim - 3, others.ndim - 3
+    centre = others.reshape(batch, n_uav, -1, 6)[:, :, 0].mean(axis=1)  # (B, 6)
+    a = own - centre.reshape(batch, 1, *(1,) * extra, 6)
+    b = others - centre.reshape(batch, 1, *(1,) * tail, 6)
+    degree = adjacency.sum(axis=-1).reshape(batch, n_uav, *(1,) * extra)
+    h_b = np.einsum("bij,bj...->bi...", adjacency, b)  # (B, N, *tail, 6)
+    h_bb = np.einsum("bij,bj...->bi...", adjacency, np.einsum("...k,...k->...", b, b))
     lead = (slice(None), slice(None)) + (None,) * (extra - tail)
     return (
-        deg_x * np.einsum("...k,...k->...", a, a)
-        - 2.0 * np.einsum("...k,...k->...", a, sum_rel[lead])
-        + sum_sq[lead]
+        degree * np.einsum("...k,...k->...", a, a)
+        - 2.0 * np.einsum("...k,...k->...", a, h_b[lead])
+        + h_bb[lead]
     )
 
 

@@ -5,7 +5,8 @@ is held over the step (zero-order hold), which makes the step exact:
 
     p+ = p + v dt + ½ a dt²,    v+ = v + a dt.
 
-The plant uses ``a = u + d``; the MPC prediction uses ``a = u_n`` (disturbance-free model, SPEC §3.4).
+The plant uses ``a = u + d``; the MPC prediction uses ``a = u_n`` (disturbance-free model,
+SPEC §3.4).
 """
 
 from __future__ import annotations
@@ -66,8 +67,9 @@ def rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndarray:
     v0 = z0[..., None, 3:]
     dv = inputs * dt
     v_after = v0 + np.cumsum(dv, axis=-2)  # v at k = 1..H
-    v_before = np.concatenate((np.broadcast_to(v0, v_after[..., :1, :].shape), v_after[..., :-1, :]),
-                              axis=-2)  # v at k = 0..H-1
+    v_before = np.concatenate(
+        (np.broadcast_to(v0, v_after[..., :1, :].shape), v_after[..., :-1, :]), axis=-2
+    )  # v at k = 0..H-1
     dp, _ = zoh_increments(v_before, inputs, dt)
     p_after = z0[..., None, :3] + np.cumsum(dp, axis=-2)
     future = np.concatenate((p_after, v_after), axis=-1)
