@@ -312,7 +312,7 @@ def test_observer_step_matches_literal_spec(config: ObserverConfig) -> None:
     )
     v0 = 20.0 + rng.normal(0, 0.1, shape)
     u = rng.uniform(-2, 2, shape)
-    ticks = tick_velocities(v0, u + rng.uniform(-0.3, 0.3, shape), DT, 20)
+    ticks = np.stack(list(tick_velocities(v0, u + rng.uniform(-0.3, 0.3, shape), DT, 20)))
     got = observer_step(state, ticks, u, DT / 20, config)
     want = reference_observer_step(state, ticks, u, DT / 20, config)
     for name in ("v_hat", "s0", "d_hat", "e_prev"):
@@ -325,7 +325,7 @@ def test_observer_step_does_not_mutate_input() -> None:
     rng = np.random.default_rng(0)
     state = ObserverState(*(rng.normal(size=(N_UAV, 3)) for _ in range(4)))
     before = state.copy()
-    v_ticks = tick_velocities(rng.normal(size=(N_UAV, 3)), rng.normal(size=(N_UAV, 3)), DT, 20)
+    v_ticks = np.stack(list(tick_velocities(rng.normal(size=(N_UAV, 3)), rng.normal(size=(N_UAV, 3)), DT, 20)))
     u = rng.normal(size=(N_UAV, 3))
     u_before = u.copy()
     new = observer_step(state, v_ticks, u, DT / 20, ObserverConfig())
@@ -377,7 +377,7 @@ def test_no_disturbance_keeps_estimate_near_zero() -> None:
 def test_tick_velocities() -> None:
     v0 = np.array([[1.0, 2.0, 3.0], [0.0, 0.0, 0.0]])
     a = np.array([[1.0, -1.0, 0.0], [2.0, 0.0, 4.0]])
-    ticks = tick_velocities(v0, a, 0.2, 4)
+    ticks = np.stack(list(tick_velocities(v0, a, 0.2, 4)))
     assert ticks.shape == (4, 2, 3)
     for j in range(4):
         np.testing.assert_allclose(ticks[j], v0 + j * 0.05 * a, rtol=1e-15, atol=1e-15)
