@@ -72,7 +72,7 @@ def _seeds_for(seed: SeedLike, count: int) -> list[int | None]:
         return [None] * count
     if isinstance(seed, int | np.integer):
         return [int(seed) + b for b in range(count)]
-    seeds = [int(s) for s in seed]
+    seeds = [None if s is None else int(s) for s in seed]
     if len(seeds) != count:
         raise ValueError(f"expected {count} seeds (one per reset copy), got {len(seeds)}")
     return seeds
@@ -121,9 +121,13 @@ class FormationSim:
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> StepResult:
         """Start new episodes in all copies, or only in those where ``mask`` is True.
 
+        A copy reset with an explicit seed also starts a stream of follow-up seeds; a later reset
+        of that copy with ``seed=None`` takes the next seed of its stream (so a sequence of
+        episodes is reproducible from one seed), and a copy never seeded uses fresh entropy.
+
         Args:
-            seed: an int (copy b of the reset copies gets ``seed + b``), one seed per reset copy,
-                or None for fresh entropy.
+            seed: an int (copy b of the reset copies gets ``seed + b``), one seed (or None) per
+                reset copy, or None.
             mask: (B,) bool; None resets every copy (required on the first call).
 
         Returns:
@@ -139,8 +143,9 @@ class FormationSim:
             raise ValueError(f"mask must have shape ({B},), got {mask.shape}")
         indices = np.flatnonzero(mask)
         seeds = _seeds_for(seed, len(indices))
-        if mask.all():
+        if self.last is None:
             self._rngs = [np.random.default_rng() for _ in range(B)]
+            self._seed_streams: list[np.random.Generator | None] = [None] * B
             self.z = np.zeros((B, N, 6))
             self.gust = np.zeros((B, N, 3))
             self.noise = np.zeros((B, NOISE_BLOCK, N, self.disturbance.noise_dim))
@@ -152,6 +157,11 @@ class FormationSim:
         low = np.asarray(cfg.initial.position_low)
         high = np.asarray(cfg.initial.position_high)
         for b, s in zip(indices, seeds):
+            if s is not None:
+                follow_up = np.random.SeedSequence(s).spawn(1)[0]
+                self._seed_streams[b] = np.random.default_rng(follow_up)
+            elif self._seed_streams[b] is not None:
+                s = int(self._seed_streams[b].integers(2**63))
             rng = np.random.default_rng(s)
             self._rngs[b] = rng
             self.z[b, :, :3] = low + (high - low) * rng.random((N, 3))

@@ -19,6 +19,7 @@ Pure functions shared by the environment (encoding) and by policies acting from 
 | 20 + 7k : 23 + 7k | 3 | relative formation position error (p_j - p^d_j)-(p_i - p^d_i) | m | / 50 |
 | 23 + 7k : 26 + 7k | 3 | relative formation velocity error (v_j-v^d_j)-(v_i-v^d_i) | m/s | / 20 |
 
+Every scaled value is clipped to ±100 (the space's bounds), reached only far off course.
 Slots of the k-th other UAV are filled for every UAV (they are sensed, e.g. by radar); the flag says
 whether UAV i receives messages from it (and so whether it enters J_i).
 """
@@ -36,6 +37,7 @@ ESTIMATE_SCALE = 0.5  # [m/s^2]
 DISTANCE_SCALE = 100.0  # [m]
 FORMATION_SCALE = 50.0  # [m]
 DISTANCE_CLIP = 10.0  # clip of scaled distances [-]
+OBSERVATION_BOUND = 100.0  # every scaled value is clipped to ±this (only reached far off course)
 OWN_DIM = 19
 OTHER_DIM = 7
 
@@ -112,7 +114,8 @@ def build_observations(
     )
     other[..., 1:4] = relative[..., :3] / FORMATION_SCALE
     other[..., 4:7] = relative[..., 3:] / VELOCITY_SCALE
-    return np.concatenate((own, other.reshape(batch, n_uav, -1)), axis=-1).astype(np.float32)
+    flat = np.concatenate((own, other.reshape(batch, n_uav, -1)), axis=-1)
+    return np.clip(flat, -OBSERVATION_BOUND, OBSERVATION_BOUND).astype(np.float32)
 
 
 @dataclass(frozen=True)

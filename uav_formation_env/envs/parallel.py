@@ -1,0 +1,267 @@
+"""``uav_formation_v0``: PettingZoo ParallelEnv of UAV formation under disturbances and obstacles.
+
+A thin shell over :class:`~uav_formation_env.sim.FormationSim` with one scenario copy: it holds no
+physics and no formula. Agents ``uav_0 … uav_{N-1}`` (paper: N = 5).
+
+**Action** of each agent: a normalised acceleration command ``a ∈ [-1, 1]^3`` (Box, float32); the
+formation input is ``u_n = a · u_max`` (u_max = 5 m/s² per axis for the paper). Finite actions out
+of range are clipped to [-1, 1]. NaN or infinite values, a wrong shape, a missing or an unknown
+agent raise ``ValueError`` naming the agent, and the environment is left as it was. With the
+observer on, the plant applies ``u = clip(u_n + u_d, ±u_max)`` with ``u_d = -(d̂ + s0)``.
+
+**Observation** of each agent: what UAV i senses or receives, float32, ``19 + 7 (N - 1)`` values
+(46 for N = 5); the slot table is in :mod:`uav_formation_env.core.observation`.
+
+**Reward** of agent i: minus the stage cost of its own game cost J_i at the realised transition,
+``-(q Σ_j h_ij ||ε_ij||² + r ||u_n,i||² + n ||v_i - v^d_i||²)`` (the same function the reference
+MPC minimises). With ``collision.mode == "penalty"``, ``collision.penalty`` is subtracted in a step
+where the agent collides. Summed over an episode it is the paper's performance index along the
+realised trajectory.
+
+**Termination and truncation**: episodes truncate at the scenario's duration (1000 steps for the
+paper). ``collision.mode``: ``"none"`` reports collisions only (default), ``"penalty"`` adds the
+penalty, ``"terminate"`` ends the episode for every agent when any UAV collides (a UAV closer than
+``collision.uav_distance`` to another, or inside an obstacle). With rewards that are always
+negative, ``"terminate"`` makes an early crash attractive to a learner; prefer ``"penalty"``.
+
+**Info** of agent i: ``J`` (stage cost), ``cost_terms`` (formation, energy, terminal, velocity),
+``disturbance`` and ``disturbance_estimate`` [m/s²], ``reference_velocity`` [m/s], ``group``
+(sub-formation id), ``neighbours`` (agents it receives from this step), ``obstacle_distance`` (to
+the nearest obstacle surface [m]), ``min_separation`` (to the nearest other UAV [m]), ``collision``,
+``position`` [m], ``velocity`` [m/s], ``penalty``, ``t`` [s].
+
+**State** (``state()``): positions / 100 m, velocities / 20 m/s, reference velocities / 20 m/s,
+estimates / 0.5 m/s², t / duration, and the adjacency matrix, flattened (float32).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.core.observation import (
+    DISTANCE_SCALE,
+    ESTIMATE_SCALE,
+    OBSERVATION_BOUND,
+    VELOCITY_SCALE,
+    build_observations,
+    observation_dim,
+)
+from uav_formation_env.sim import FormationSim, StepResult
+
+RENDER_MODES = ["rgb_array", "human"]
+
+
+def agent_names(n_uav: int) -> list[str]:
+    """``["uav_0", …, "uav_{N-1}"]``."""
+    return [f"uav_{i}" for i in range(n_uav)]
+
+
+def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
+    """(B, N, dim) observations of a sim step, the one place the env encodes them."""
+    scenario = sim.scenario
+    return build_observations(
+        result.z,
+        result.reference_velocity,
+        result.estimate,
+        result.adjacency,
+        result.avoiding,
+        result.t / scenario.duration,
+        sim.offsets,
+        sim.obstacle_centers,
+        sim.obstacle_radii,
+        result.min_separation,
+        scenario.formation.mirrored_offsets,
+    )
+
+
+def global_state(sim: FormationSim, result: StepResult) -> np.ndarray:
+    """(B, 12 N + 1 + N²) global state for centralised critics (see module docstring)."""
+    batch = result.z.shape[0]
+    parts = (
+        result.z[..., :3].reshape(batch, -1) / DISTANCE_SCALE,
+        result.z[..., 3:].reshape(batch, -1) / VELOCITY_SCALE,
+        result.reference_velocity.reshape(batch, -1) / VELOCITY_SCALE,
+        result.estimate.reshape(batch, -1) / ESTIMATE_SCALE,
+        (result.t / sim.scenario.duration)[:, None],
+        result.adjacency.reshape(batch, -1),
+    )
+    return np.concatenate(parts, axis=-1).astype(np.float32)
+
+
+def penalties(sim: FormationSim, result: StepResult) -> np.ndarray:
+    """(B, N) collision penalty of each agent in this step (0 unless mode is "penalty")."""
+    cfg = sim.scenario.collision
+    if cfg.mode != "penalty":
+        return np.zeros(result.collision.shape)
+    return cfg.penalty * result.collision
+
+
+def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
+    """Check an action dict and return the clipped (N, 3) array; raise ``ValueError`` if bad."""
+    if not isinstance(actions, dict):
+        raise ValueError(f"actions must be a dict {{agent: (3,) array}}, got {type(actions)}")
+    unknown = sorted(set(actions) - set(agents))
+    if unknown:
+        raise ValueError(f"unknown agent(s) {unknown}; expected the agents {agents}")
+    missing = [a for a in agents if a not in actions]
+    if missing:
+        raise ValueError(f"missing action(s) for agent(s) {missing}; every live agent must act")
+    stacked = np.empty((len(agents), 3))
+    for i, agent in enumerate(agents):
+        try:
+            value = np.asarray(actions[agent], dtype=float)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"action of {agent} is not numeric: {actions[agent]!r}") from error
+        if value.shape != (3,):
+            raise ValueError(f"action of {agent} must have shape (3,), got {value.shape}")
+        if not np.isfinite(value).all():
+            raise ValueError(f"action of {agent} contains NaN or infinite values: {value}")
+        stacked[i] = value
+    return np.clip(stacked, -1.0, 1.0)
+
+
+class UAVFormationParallelEnv(ParallelEnv):
+    """PettingZoo ParallelEnv of the scenario (see the module docstring for the contract).
+
+    Args:
+        scenario: a validated scenario.
+        render_mode: None, "rgb_array" or "human".
+    """
+
+    metadata = {
+        "name": "uav_formation_v0",
+        "render_modes": RENDER_MODES,
+        "render_fps": 5,
+        "is_parallelizable": True,
+    }
+
+    def __init__(self, scenario: Scenario, render_mode: str | None = None) -> None:
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(
+                f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}"
+            )
+        self.scenario = scenario
+        self.render_mode = render_mode
+        self.sim = FormationSim(scenario, batch_size=1)
+        self.possible_agents = agent_names(scenario.n_uav)
+        self.agents: list[str] = []
+        dim = observation_dim(scenario.n_uav)
+        bound = OBSERVATION_BOUND
+        obs_space = spaces.Box(-bound, bound, shape=(dim,), dtype=np.float32)
+        act_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+        self.observation_spaces = {a: obs_space for a in self.possible_agents}
+        self.action_spaces = {a: act_space for a in self.possible_agents}
+        n = scenario.n_uav
+        self.state_space = spaces.Box(
+            -np.inf, np.inf, shape=(12 * n + 1 + n * n,), dtype=np.float32
+        )
+        self._result: StepResult | None = None
+        self._renderer = None
+
+    def observation_space(self, agent: str) -> spaces.Box:
+        return self.observation_spaces[agent]
+
+    def action_space(self, agent: str) -> spaces.Box:
+        return self.action_spaces[agent]
+
+    def reset(
+        self, seed: int | None = None, options: dict | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        """Start an episode; ``seed`` makes it (and later unseeded resets) reproducible."""
+        self._result = self.sim.reset(seed=None if seed is None else [seed])
+        self.agents = list(self.possible_agents)
+        if self._renderer is not None:
+            self._renderer.reset()
+        return self._observations(), self._infos(np.zeros(self.scenario.n_uav))
+
+    def step(self, actions: dict[str, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
+        """Advance one control step δ with every live agent's normalised action."""
+        if not self.agents:
+            raise RuntimeError("the episode is over (or reset() was never called): call reset()")
+        clipped = validate_actions(actions, self.agents)
+        result = self.sim.step(clipped[None] * self.scenario.dynamics.u_max)
+        self._result = result
+        penalty = penalties(self.sim, result)[0]
+        reward = -(result.cost.total[0] + penalty)
+        collided = bool(result.collision[0].any())
+        terminated = self.scenario.collision.mode == "terminate" and collided
+        truncated = bool(result.truncated[0]) and not terminated
+        obs = self._observations()
+        infos = self._infos(penalty)
+        rewards = {a: float(reward[i]) for i, a in enumerate(self.agents)}
+        terminations = {a: terminated for a in self.agents}
+        truncations = {a: truncated for a in self.agents}
+        if terminated or truncated:
+            self.agents = []
+        if self.render_mode == "human":
+            self.render()
+        return obs, rewards, terminations, truncations, infos
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        obs = observations_of(self.sim, self._result)[0]
+        return {a: obs[i] for i, a in enumerate(self.possible_agents)}
+
+    def _infos(self, penalty: np.ndarray) -> dict[str, dict]:
+        r = self._result
+        terms = {name: value[0] for name, value in r.cost.as_dict().items()}
+        adjacency = r.adjacency[0]
+        names = self.possible_agents
+        infos = {}
+        for i, agent in enumerate(names):
+            infos[agent] = {
+                "J": float(r.cost.total[0, i]),
+                "cost_terms": {name: float(value[i]) for name, value in terms.items()},
+                "disturbance": r.disturbance[0, i].copy(),
+                "disturbance_estimate": r.estimate[0, i].copy(),
+                "reference_velocity": r.reference_velocity[0, i].copy(),
+                "group": int(r.groups[0, i]),
+                "neighbours": [names[j] for j in np.flatnonzero(adjacency[i])],
+                "obstacle_distance": float(r.obstacle_distance[0, i]),
+                "min_separation": float(r.min_separation[0, i]),
+                "collision": bool(r.collision[0, i]),
+                "position": r.z[0, i, :3].copy(),
+                "velocity": r.z[0, i, 3:].copy(),
+                "penalty": float(penalty[i]),
+                "t": float(r.t[0]),
+            }
+        return infos
+
+    def state(self) -> np.ndarray:
+        """Global state (see the module docstring)."""
+        if self._result is None:
+            raise RuntimeError("call reset() before state()")
+        return global_state(self.sim, self._result)[0]
+
+    def render(self) -> np.ndarray | None:
+        """Top view: an RGB array ("rgb_array") or a window ("human")."""
+        if self.render_mode is None:
+            return None
+        if self._result is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            from uav_formation_env.render import TopViewRenderer
+
+            self._renderer = TopViewRenderer(self.scenario)
+        r = self._result
+        frame = self._renderer.frame(
+            r.z[0, :, :3],
+            r.reference_velocity[0],
+            r.adjacency[0],
+            r.groups[0],
+            float(r.t[0]),
+            r.collision[0],
+        )
+        if self.render_mode == "human":
+            self._renderer.show(frame)
+            return None
+        return frame
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
