@@ -17,6 +17,7 @@ from typing import Any, Union
 import yaml
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.scenarios import make_scenario, windy_scenario
 
 _T = typing.TypeVar("_T")
 
@@ -137,7 +138,14 @@ def paper_scenario() -> Scenario:
     return Scenario()
 
 
-SCENARIOS: dict[str, typing.Callable[[], Scenario]] = {"paper": paper_scenario}
+SCENARIOS: dict[str, typing.Callable[[], Scenario]] = {
+    "paper": paper_scenario,
+    "open_field": lambda: make_scenario(obstacles="none"),
+    "windy": windy_scenario,
+    "random_obstacles": lambda: make_scenario(obstacles="random", seed=0),
+    "n3": lambda: make_scenario(n_uav=3),
+    "n8": lambda: make_scenario(n_uav=8),
+}
 
 
 def resolve_scenario(scenario: str | Path | Scenario | Mapping[str, Any] = "paper") -> Scenario:
