@@ -4,13 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg", force=False)
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from uav_formation_env.config import Scenario  # noqa: E402
+from uav_formation_env.config import Scenario
 
 
 def draw_obstacles(ax: plt.Axes, scenario: Scenario) -> None:

@@ -1,0 +1,226 @@
+"""TopViewRenderer and write_gif: frame format, content, trails, edges, determinism, GIF output."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from matplotlib.colors import to_rgb
+from PIL import Image, ImageSequence
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.render import (
+    COLLISION_COLOR,
+    OBSTACLE_COLOR,
+    TopViewRenderer,
+    group_edges,
+    write_gif,
+)
+from uav_formation_env.sim import FormationSim
+
+SCENARIO = Scenario()  # paper: 5 UAVs, obstacles at (300, 0) and (1050, 400), radius 30 m
+N = SCENARIO.n_uav
+OFFSETS = np.asarray(SCENARIO.formation.offsets)[:, :3]
+ADJACENCY = np.asarray(SCENARIO.formation.adjacency, dtype=float)
+VELOCITY = np.tile([20.0, 0.0, 0.0], (N, 1))
+ONE_GROUP = np.zeros(N, dtype=np.int64)
+
+
+def rgb255(color: str) -> np.ndarray:
+    return np.round(np.asarray(to_rgb(color)) * 255).astype(np.uint8)
+
+
+def count_color(image: np.ndarray, color: str) -> int:
+    return int((image == rgb255(color)).all(axis=-1).sum())
+
+
+def draw(renderer: TopViewRenderer, at=(0.0, 0.0), adjacency=ADJACENCY, groups=ONE_GROUP, **kw):
+    positions = OFFSETS + np.array([at[0], at[1], 0.0])
+    return renderer.frame(positions, VELOCITY, adjacency, groups, kw.pop("t", 1.0), **kw)
+
+
+@pytest.mark.parametrize("size", [(640, 640), (320, 240), (333, 517)])
+@pytest.mark.parametrize("show_ticks", [False, True])
+def test_frame_shape_dtype(size, show_ticks):
+    width, height = size
+    image = draw(TopViewRenderer(SCENARIO, width=width, height=height, show_ticks=show_ticks))
+    assert image.shape == (height, width, 3)
+    assert image.dtype == np.uint8
+    assert image.flags.c_contiguous
+
+
+def test_frame_is_not_blank():
+    image = draw(TopViewRenderer(SCENARIO, 320, 320))
+    colours = np.unique(image.reshape(-1, 3), axis=0)
+    assert len(colours) > 50
+    assert (image == 255).all(axis=-1).mean() > 0.5  # mostly background
+
+
+def test_obstacle_drawn_when_in_view_and_not_when_far():
+    renderer = TopViewRenderer(SCENARIO)
+    image = draw(renderer, at=(215.0, 0.0))  # swarm just before the obstacle at (300, 0)
+    row, col = np.round(renderer.data_to_pixel([[300.0, 0.0]])[0]).astype(int)
+    assert 0 <= row < renderer.height and 0 <= col < renderer.width
+    assert np.array_equal(image[row, col], rgb255(OBSTACLE_COLOR))
+    # filled disc: about pi r^2 pixels at 640 px / 300 m
+    px_per_m = renderer.width / renderer.view_span
+    area = np.pi * (30.0 * px_per_m) ** 2
+    assert 0.8 * area < count_color(image, OBSTACLE_COLOR) < 1.1 * area
+
+    # dashed safety circle at R_s = 40 m: partly, not fully, inked
+    angles = np.linspace(0.0, 2 * np.pi, 720, endpoint=False)
+    ring = np.stack([300.0 + 40.0 * np.cos(angles), 40.0 * np.sin(angles)], axis=1)
+    rows, cols = np.round(renderer.data_to_pixel(ring)).astype(int).T
+    inked = (image[rows, cols] < 235).any(axis=-1).mean()
+    assert 0.3 < inked < 0.9
+    inside_margin = 300.0 + 35.0 * np.cos(angles), 35.0 * np.sin(angles)
+    rows, cols = np.round(renderer.data_to_pixel(np.stack(inside_margin, axis=1))).astype(int).T
+    assert (image[rows, cols] > 200).all(axis=-1).mean() > 0.9  # between disc and circle: empty
+
+    far = draw(TopViewRenderer(SCENARIO), at=(-2000.0, -2000.0))
+    assert count_color(far, OBSTACLE_COLOR) == 0
+
+
+def test_trails_grow_then_are_capped_and_reset_clears():
+    renderer = TopViewRenderer(SCENARIO, 200, 200, trail_length=4)
+    assert renderer.trail.shape == (0, N, 3)
+    for k in range(7):
+        draw(renderer, at=(5.0 * k, 0.0))
+        assert renderer.trail.shape == (min(k + 1, 4), N, 3)
+    np.testing.assert_allclose(renderer.trail[:, 0, 0], [15.0, 20.0, 25.0, 30.0])  # oldest first
+    renderer.reset()
+    assert renderer.trail.shape == (0, N, 3)
+
+
+def test_trails_are_drawn():
+    with_trail = TopViewRenderer(SCENARIO, 320, 320, trail_length=50)
+    for k in range(20):
+        image = draw(with_trail, at=(5.0 * k, 0.0), t=2.0)
+    fresh = draw(TopViewRenderer(SCENARIO, 320, 320, trail_length=50), at=(95.0, 0.0), t=2.0)
+    no_trail = TopViewRenderer(SCENARIO, 320, 320, trail_length=0)
+    for k in range(20):
+        image_no_trail = draw(no_trail, at=(5.0 * k, 0.0), t=2.0)
+    assert not np.array_equal(image, fresh)
+    assert np.array_equal(image_no_trail, fresh)
+    with_trail.reset()
+    assert np.array_equal(draw(with_trail, at=(95.0, 0.0), t=2.0), fresh)
+
+
+def test_group_edges_inside_groups_only():
+    complete = np.ones((4, 4)) - np.eye(4)
+    edges = group_edges(complete, np.array([0, 0, 1, 1]))
+    assert sorted(map(tuple, edges)) == [(0, 1), (1, 0), (2, 3), (3, 2)]
+    assert group_edges(np.zeros((4, 4)), np.zeros(4, dtype=int)).shape == (0, 2)
+    # the diagonal is never an edge; (receiver, sender) = (row, column)
+    assert sorted(map(tuple, group_edges(np.eye(3) + np.eye(3, k=1), np.zeros(3)))) == [
+        (0, 1),
+        (1, 2),
+    ]
+
+
+def test_edges_change_the_frame_and_only_inside_groups():
+    renderer = TopViewRenderer(SCENARIO, 320, 320, trail_length=0)
+    complete = np.ones((N, N)) - np.eye(N)
+    none = draw(renderer, adjacency=np.zeros((N, N)))
+    full = draw(renderer, adjacency=complete)
+    assert not np.array_equal(none, full)
+    # every UAV in its own group: no edge survives
+    alone = draw(renderer, adjacency=complete, groups=np.arange(N))
+    assert np.array_equal(alone, none)
+    split = draw(renderer, adjacency=complete, groups=np.array([0, 0, 1, 0, 1]))
+    assert not np.array_equal(split, full) and not np.array_equal(split, none)
+
+
+def test_collisions_highlighted():
+    renderer = TopViewRenderer(SCENARIO, 320, 320, trail_length=0)
+    plain = draw(renderer)
+    hit = draw(renderer, collisions=np.array([False, True, False, False, False]))
+    assert count_color(plain, COLLISION_COLOR) == 0
+    assert count_color(hit, COLLISION_COLOR) > 20
+
+
+def test_frames_are_deterministic():
+    def episode(renderer):
+        renderer.reset()
+        return [draw(renderer, at=(7.0 * k, 3.0 * k), t=0.2 * k) for k in range(5)]
+
+    a, b = TopViewRenderer(SCENARIO, 256, 256), TopViewRenderer(SCENARIO, 256, 256)
+    first, second, again = episode(a), episode(b), episode(a)
+    for x, y, z in zip(first, second, again):
+        assert np.array_equal(x, y)
+        assert np.array_equal(x, z)
+    assert not np.array_equal(first[0], first[1])
+
+
+def test_frame_from_step_matches_frame():
+    result = FormationSim(SCENARIO).reset(seed=0)
+    a = TopViewRenderer(SCENARIO, 256, 256).frame_from_step(result)
+    b = TopViewRenderer(SCENARIO, 256, 256).frame(
+        result.z[0, :, :3],
+        result.reference_velocity[0],
+        result.adjacency[0],
+        result.groups[0],
+        float(result.t[0]),
+        collisions=result.collision[0],
+    )
+    assert np.array_equal(a, b)
+
+
+def test_view_follows_swarm_and_fits_it():
+    renderer = TopViewRenderer(SCENARIO, 320, 320, view_span=100.0)
+    draw(renderer, at=(500.0, -200.0))
+    centre = renderer.data_to_pixel(np.mean(OFFSETS[:, :2], axis=0) + [[500.0, -200.0]])[0]
+    np.testing.assert_allclose(centre, [160.0, 160.0], atol=1.0)
+    # a swarm wider than view_span widens the view: every UAV is in the image
+    spread = np.array([[-300.0, 0.0, 0.0], [300.0, 0.0, 0.0], [0.0, 50.0, 0], [0, -50, 0], [0] * 3])
+    renderer.frame(spread, VELOCITY, ADJACENCY, ONE_GROUP, 0.0)
+    rows, cols = renderer.data_to_pixel(spread[:, :2]).T
+    assert ((rows >= 0) & (rows < 320) & (cols >= 0) & (cols < 320)).all()
+    # equal aspect: one metre is as many pixels along x as along y
+    (r0, c0), (r1, c1) = renderer.data_to_pixel([[0.0, 0.0], [10.0, 10.0]])
+    assert abs(c1 - c0) == pytest.approx(abs(r1 - r0))
+
+
+def test_non_finite_positions_do_not_crash():
+    positions = OFFSETS.copy()
+    positions[2] = np.nan
+    image = TopViewRenderer(SCENARIO, 128, 128).frame(positions, VELOCITY, ADJACENCY, ONE_GROUP, 0)
+    assert image.shape == (128, 128, 3)
+
+
+def test_bad_inputs_rejected():
+    renderer = TopViewRenderer(SCENARIO, 128, 128)
+    with pytest.raises(ValueError, match="positions"):
+        renderer.frame(OFFSETS[:3], VELOCITY, ADJACENCY, ONE_GROUP, 0.0)
+    with pytest.raises(ValueError, match="adjacency"):
+        renderer.frame(OFFSETS, VELOCITY, ADJACENCY[:2], ONE_GROUP, 0.0)
+    with pytest.raises(ValueError, match="collisions"):
+        renderer.frame(OFFSETS, VELOCITY, ADJACENCY, ONE_GROUP, 0.0, collisions=[True])
+    with pytest.raises(ValueError, match="trail_length"):
+        TopViewRenderer(SCENARIO, trail_length=-1)
+
+
+def test_write_gif_round_trip(tmp_path):
+    renderer = TopViewRenderer(SCENARIO, 160, 120)
+    frames = [draw(renderer, at=(10.0 * k, 0.0), t=0.2 * k) for k in range(4)]
+    path = write_gif(frames, tmp_path / "episode.gif", fps=10)
+    assert path == tmp_path / "episode.gif"
+    with Image.open(path) as gif:
+        assert gif.format == "GIF"
+        assert gif.size == (160, 120)
+        assert gif.n_frames == 4
+        assert gif.info["duration"] == 100
+        decoded = [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(gif)]
+    assert len(decoded) == 4
+    # palette quantisation is lossy, but each decoded frame stays close to its source
+    for source, back in zip(frames, decoded):
+        assert np.abs(source.astype(int) - back.astype(int)).mean() < 3.0
+
+
+def test_write_gif_rejects_bad_frames(tmp_path):
+    with pytest.raises(ValueError, match="at least one"):
+        write_gif([], tmp_path / "a.gif")
+    good = np.zeros((8, 8, 3), dtype=np.uint8)
+    with pytest.raises(ValueError, match="shape"):
+        write_gif([good, np.zeros((8, 9, 3), dtype=np.uint8)], tmp_path / "b.gif")
+    with pytest.raises(ValueError, match="dtype"):
+        write_gif([good.astype(float)], tmp_path / "c.gif")
