@@ -10,7 +10,7 @@ agent raise ``ValueError`` naming the agent, and the environment is left as it w
 observer on, the plant applies ``u = clip(u_n + u_d, ±u_max)`` with ``u_d = -(d̂ + s0)``.
 
 **Observation** of each agent: what UAV i senses or receives, float32, ``19 + 7 (N - 1)`` values
-(46 for N = 5); the slot table is in :mod:`uav_formation_env.core.observation`.
+(47 for N = 5); the slot table is in :mod:`uav_formation_env.core.observation`.
 
 **Reward** of agent i: minus the stage cost of its own game cost J_i at the realised transition,
 ``-(q Σ_j h_ij ||ε_ij||² + r ||u_n,i||² + n ||v_i - v^d_i||²)`` (the same function the reference
