@@ -325,7 +325,9 @@ def test_observer_step_does_not_mutate_input() -> None:
     rng = np.random.default_rng(0)
     state = ObserverState(*(rng.normal(size=(N_UAV, 3)) for _ in range(4)))
     before = state.copy()
-    v_ticks = np.stack(list(tick_velocities(rng.normal(size=(N_UAV, 3)), rng.normal(size=(N_UAV, 3)), DT, 20)))
+    v_ticks = np.stack(
+        list(tick_velocities(rng.normal(size=(N_UAV, 3)), rng.normal(size=(N_UAV, 3)), DT, 20))
+    )
     u = rng.normal(size=(N_UAV, 3))
     u_before = u.copy()
     new = observer_step(state, v_ticks, u, DT / 20, ObserverConfig())

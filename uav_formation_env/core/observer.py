@@ -78,7 +78,9 @@ def observer_step(
         The new state (the input state is not modified).
     """
     c = config
-    v_hat, s0, d_hat, e_prev = (a.copy() for a in (state.v_hat, state.s0, state.d_hat, state.e_prev))
+    v_hat, s0, d_hat, e_prev = (
+        a.copy() for a in (state.v_hat, state.s0, state.d_hat, state.e_prev)
+    )
     h_u = h * u_applied
     s0_gain = h / (c.pi2 * c.lambda2)
     switch_gain = h * (c.eta + c.rho) if c.literal_sign_law else h * c.eta
