@@ -10,11 +10,19 @@ is the ``k``-th summand: ``q Σ_j h_ij ||ε_ij||² + r ||u_i||² + n ||v_i - v^d
 from the same two term functions below.
 
 Shapes: B scenario copies, N UAVs, P candidates per UAV, H horizon steps.
+
+Neighbour predictions come either as one trajectory per sender, seen alike by every receiver
+(B, N, H+1, 6), or as each receiver's own view of every sender (B, N_recv, N_send, H+1, 6): a UAV
+that only knows relative states works in its own frame, and the views of a sender differ between
+receivers by a translation (and by sensing noise). The formula is the same; only the sum over the
+senders runs over the receiver's own views. :func:`prepare_horizon_cost` computes the part of J_i
+that does not depend on the candidates once, for optimisers that evaluate many populations.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -66,36 +74,116 @@ def anchored(z: np.ndarray, offsets: np.ndarray, mirrored: bool = False) -> np.n
     return z - relative_offset_sign(mirrored) * zd
 
 
-def formation_error_sq(own: np.ndarray, others: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True)
+class NeighbourMoments:
+    """The sender side of ``Σ_j h_ij ||a_i - b_j||²``, summed once for any number of ``a_i``.
+
+    Both sides are moved to a centre per copy (per receiver for per-receiver views) first, so that
+    no terms of the size of absolute positions (hundreds of metres) cancel.
+
+    Attributes:
+        centre: (B, R, 6) the shift subtracted from both sides.
+        degree: (B, R) ``Σ_j h_ij``.
+        h_b: (B, R, *tail, 6) ``Σ_j h_ij (b_j - centre)``.
+        h_bb: (B, R, *tail) ``Σ_j h_ij ||b_j - centre||²``.
+    """
+
+    centre: np.ndarray
+    degree: np.ndarray
+    h_b: np.ndarray
+    h_bb: np.ndarray
+
+    def error_sq(self, own: np.ndarray) -> np.ndarray:
+        """``Σ_j h_ij ||own_i - b_j||²``, as ``deg_i ||a_i||² - 2 a_i·h_b + h_bb`` (centred).
+
+        Args:
+            own: (B, R, *extra, 6) receivers' anchored states; ``tail`` must be the trailing dims
+                of ``extra``.
+
+        Returns:
+            (B, R, *extra).
+        """
+        batch, n_recv = self.degree.shape
+        extra, tail = own.ndim - 3, self.h_b.ndim - 3
+        a = own - self.centre.reshape(batch, n_recv, *(1,) * extra, 6)
+        degree = self.degree.reshape(batch, n_recv, *(1,) * extra)
+        lead = (slice(None), slice(None)) + (None,) * (extra - tail)
+        return (
+            degree * np.einsum("...k,...k->...", a, a)
+            - 2.0 * np.einsum("...k,...k->...", a, self.h_b[lead])
+            + self.h_bb[lead]
+        )
+
+    def take(self, index: np.ndarray) -> NeighbourMoments:
+        """The receivers ``index`` of the flattened (B·R) axis, as one copy: shapes (1, M, ...)."""
+        return NeighbourMoments(*(_take_flat(x, index) for x in self._fields()))
+
+    def _fields(self) -> tuple[np.ndarray, ...]:
+        return self.centre, self.degree, self.h_b, self.h_bb
+
+
+def _take_flat(x: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Rows ``index`` of ``x`` with its first two axes (B, R) flattened, as (1, M, ...)."""
+    return x.reshape(-1, *x.shape[2:])[index][None]
+
+
+def neighbour_moments(
+    others: np.ndarray, adjacency: np.ndarray, per_receiver: bool = False
+) -> NeighbourMoments:
+    """Sum the senders' side of the formation error (see :class:`NeighbourMoments`).
+
+    Args:
+        others: senders' anchored states, either one state per sender seen alike by every
+            receiver, (B, N, *tail, 6), or each receiver's own view of every sender,
+            (B, R, N, *tail, 6) (``per_receiver=True``; e.g. in each receiver's own frame).
+        adjacency: (B, R, N) h_ij, row = receiver.
+        per_receiver: whether ``others`` holds per-receiver views.
+
+    Returns:
+        :class:`NeighbourMoments` with leading dims (B, R).
+    """
+    batch, n_recv = adjacency.shape[:2]
+    if per_receiver:
+        tail = others.ndim - 4
+        first = others.reshape(batch, n_recv, others.shape[2], -1, 6)[:, :, :, 0]
+        centre = first.mean(axis=2)  # (B, R, 6)
+        b = others - centre.reshape(batch, n_recv, 1, *(1,) * tail, 6)
+        spec = "bij,bij...->bi..."
+    else:
+        tail = others.ndim - 3
+        first = others.reshape(batch, others.shape[1], -1, 6)[:, :, 0]
+        centre = np.broadcast_to(first.mean(axis=1)[:, None], (batch, n_recv, 6))
+        b = others - centre[:, :1].reshape(batch, 1, *(1,) * tail, 6)
+        spec = "bij,bj...->bi..."
+    return NeighbourMoments(
+        centre=centre,
+        degree=adjacency.sum(axis=-1),
+        h_b=np.einsum(spec, adjacency, b),
+        h_bb=np.einsum(spec, adjacency, np.einsum("...k,...k->...", b, b)),
+    )
+
+
+def formation_error_sq(
+    own: np.ndarray, others: np.ndarray, adjacency: np.ndarray, per_receiver: bool = False
+) -> np.ndarray:
     """``Σ_j h_ij ||own_i - others_j||²`` for anchored states, without forming all pairs.
 
     Expands the square as ``deg_i ||a_i||² - 2 a_i·Σ_j h_ij b_j + Σ_j h_ij ||b_j||²`` after moving
-    both sides to the swarm's centre (per copy), so no terms of the size of absolute positions
-    (hundreds of metres) cancel.
+    both sides to the swarm's centre (per copy; per receiver for per-receiver views), so no terms of
+    the size of absolute positions (hundreds of metres) cancel.
 
     Args:
         own: (B, N, *extra, 6) receivers' anchored states, e.g. extra = (P, H+1).
         others: (B, N, *tail, 6) senders' anchored states, where ``tail`` are the trailing dims of
-            ``extra`` (e.g. (H+1,)), or ``()``.
-        adjacency: (B, N, N) h_ij, row = receiver.
+            ``extra`` (e.g. (H+1,)), or ``()``; with ``per_receiver`` each receiver's view of
+            every sender, (B, N_recv, N_send, *tail, 6).
+        adjacency: (B, N, N) h_ij, row = receiver ((B, N_recv, N_send)).
+        per_receiver: whether ``others`` holds per-receiver views.
 
     Returns:
         (B, N, *extra).
     """
-    batch, n_uav = others.shape[:2]
-    extra, tail = own.ndim - 3, others.ndim - 3
-    centre = others.reshape(batch, n_uav, -1, 6)[:, :, 0].mean(axis=1)  # (B, 6)
-    a = own - centre.reshape(batch, 1, *(1,) * extra, 6)
-    b = others - centre.reshape(batch, 1, *(1,) * tail, 6)
-    degree = adjacency.sum(axis=-1).reshape(batch, n_uav, *(1,) * extra)
-    h_b = np.einsum("bij,bj...->bi...", adjacency, b)  # (B, N, *tail, 6)
-    h_bb = np.einsum("bij,bj...->bi...", adjacency, np.einsum("...k,...k->...", b, b))
-    lead = (slice(None), slice(None)) + (None,) * (extra - tail)
-    return (
-        degree * np.einsum("...k,...k->...", a, a)
-        - 2.0 * np.einsum("...k,...k->...", a, h_b[lead])
-        + h_bb[lead]
-    )
+    return neighbour_moments(others, adjacency, per_receiver).error_sq(own)
 
 
 def velocity_error_sq(velocity: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -137,6 +225,203 @@ def stage_cost(
     )
 
 
+@dataclass(frozen=True)
+class HorizonCost:
+    """J_i of candidate sequences, with everything that does not depend on them computed once.
+
+    Built by :func:`prepare_horizon_cost`; :func:`horizon_cost` is ``prepare(...).terms(...)``,
+    so an optimiser that evaluates many populations against the same neighbour predictions uses
+    the same definition without recomputing the senders' side.
+
+    The prediction is affine in the inputs, so it is evaluated by superposition of two
+    :func:`~uav_formation_env.core.dynamics.rollout` results computed once: the free response of
+    ``z0`` (zero inputs) and the response to each unit input component from a zero state (exact
+    by linearity; it avoids the horizon cumsums per population).
+
+    Attributes:
+        free: (B, R, H+1, 6) rollout of the measured states z(t) under zero inputs [m, m/s].
+        response: (3H, (H+1)·6) rollout from rest of each unit input component, row = component
+            of the flattened (H, 3) sequence [m, m/s per m/s^2].
+        own_offset: (B, R, 6) what anchoring subtracts from each receiver's states (± z^d_i).
+        moments: the neighbours' side of the formation error, leading dims (B, R).
+        reference_preview: (B, R, H+1, 3) v^d_i(t + kδ) [m/s].
+        weights: q, r, m, n.
+    """
+
+    free: np.ndarray
+    response: np.ndarray
+    own_offset: np.ndarray
+    moments: NeighbourMoments
+    reference_preview: np.ndarray
+    weights: CostConfig
+
+    def predict(self, candidates: np.ndarray) -> np.ndarray:
+        """Predicted states (B, R, P, H+1, 6) of candidates (B, R, P, H, 3), as ``rollout``."""
+        *lead, horizon, _ = candidates.shape
+        forced = candidates.reshape(*lead, 3 * horizon) @ self.response
+        return self.free[:, :, None] + forced.reshape(*lead, horizon + 1, 6)
+
+    def terms(self, candidates: np.ndarray) -> CostTerms:
+        """Named terms of J_i for candidates (B, R, P, H, 3) [m/s^2]; each (B, R, P)."""
+        predicted = self.predict(candidates)  # (B, R, P, H+1, 6)
+        own = predicted - self.own_offset[:, :, None, None, :]  # anchored, as anchored()
+        pair_sq = self.moments.error_sq(own)  # (B, R, P, H+1)
+        velocity_sq = velocity_error_sq(predicted[..., 3:], self.reference_preview[:, :, None])
+        w = self.weights
+        return CostTerms(
+            formation=w.q * pair_sq[..., :-1].sum(axis=-1),
+            energy=w.r * np.einsum("...hk,...hk->...", candidates, candidates),
+            terminal=w.m * pair_sq[..., -1],
+            velocity=w.n * velocity_sq.sum(axis=-1),
+        )
+
+    def terms_total(self, candidates: np.ndarray) -> np.ndarray:
+        """J_i of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P): ``terms(candidates).total``."""
+        return self.terms(candidates).total
+
+    def take(self, index: np.ndarray) -> HorizonCost:
+        """Receivers ``index`` (M,) of the flattened (B·R) axis as one copy, shapes (1, M, ...)."""
+        return HorizonCost(
+            free=_take_flat(self.free, index),
+            response=self.response,
+            own_offset=_take_flat(self.own_offset, index),
+            moments=self.moments.take(index),
+            reference_preview=_take_flat(self.reference_preview, index),
+            weights=self.weights,
+        )
+
+    def quadratic(self) -> QuadraticCost:
+        """The coefficients of J_i as a quadratic polynomial of the flattened candidate.
+
+        J_i is exactly quadratic in U (affine prediction, squared norms), so
+        ``J(x) = c + g·x + xᵀ Q x`` with ``x`` = U flattened to n = 3H components. The coefficients
+        are identified from ``1 + 2n + n(n-1)/2`` evaluations of :meth:`terms` (one call) by
+        polarisation, with no second copy of the formula: ``c = J(0)``,
+        ``g_i = (J(e_i) - J(-e_i)) / 2``, ``Q_ii = (J(e_i) + J(-e_i)) / 2 - c``,
+        ``Q_ij = (J(e_i + e_j) - J(e_i) - J(e_j) + c) / 2``. Their rounding error is about
+        1e-16 · |J| per unit input squared.
+        """
+        batch, n_recv = self.free.shape[:2]
+        horizon = self.free.shape[2] - 1
+        n = 3 * horizon
+        points, upper = _polarisation_points(n)
+        values = self.terms(
+            np.broadcast_to(
+                points.reshape(-1, horizon, 3), (batch, n_recv) + (len(points), horizon, 3)
+            )
+        ).total
+        c = values[..., 0]
+        plus, minus, pairs = (
+            values[..., 1 : n + 1],
+            values[..., n + 1 : 2 * n + 1],
+            values[..., 2 * n + 1 :],
+        )
+        hessian = np.empty((batch, n_recv, n, n))
+        diag = np.arange(n)
+        hessian[..., diag, diag] = 0.5 * (plus + minus) - c[..., None]
+        i, j = upper
+        off = 0.5 * (pairs - plus[..., i] - plus[..., j] + c[..., None])
+        hessian[..., i, j] = off
+        hessian[..., j, i] = off
+        return QuadraticCost(constant=c, linear=0.5 * (plus - minus), hessian=hessian)
+
+
+@dataclass(frozen=True)
+class QuadraticCost:
+    """``J(x) = c + g·x + xᵀ Q x`` over flattened candidates x (n = 3H).
+
+    Built by :meth:`HorizonCost.quadratic`; evaluates a population with one batched matmul.
+
+    Attributes:
+        constant: (B, R) c = J(0).
+        linear: (B, R, n) g.
+        hessian: (B, R, n, n) Q (symmetric; half the Hessian).
+    """
+
+    constant: np.ndarray
+    linear: np.ndarray
+    hessian: np.ndarray
+
+    def total(self, candidates: np.ndarray) -> np.ndarray:
+        """J_i of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P)."""
+        x = candidates.reshape(*candidates.shape[:3], -1)
+        y = x @ self.hessian + self.linear[:, :, None]
+        return self.constant[:, :, None] + np.einsum("...k,...k->...", y, x)
+
+    def take(self, index: np.ndarray) -> QuadraticCost:
+        """Receivers ``index`` (M,) of the flattened (B·R) axis as one copy, shapes (1, M, ...)."""
+        return QuadraticCost(
+            _take_flat(self.constant, index),
+            _take_flat(self.linear, index),
+            _take_flat(self.hessian, index),
+        )
+
+
+@lru_cache(maxsize=8)
+def _polarisation_points(n: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Points 0, e_i, -e_i, e_i + e_j (i < j) as (1 + 2n + n(n-1)/2, n), and the pairs (i, j)."""
+    eye = np.eye(n)
+    i, j = np.triu_indices(n, k=1)
+    points = np.concatenate((np.zeros((1, n)), eye, -eye, eye[i] + eye[j]))
+    for array in (points, i, j):
+        array.flags.writeable = False
+    return points, (i, j)
+
+
+@lru_cache(maxsize=8)
+def input_response(horizon: int, dt: float) -> np.ndarray:
+    """Rollout from rest of every unit input component: (3H, (H+1)·6) [m, m/s per m/s^2].
+
+    Row ``3k + c`` is the predicted trajectory (flattened (H+1, 6)) when only ``u(k)_c = 1``.
+    The result is cached and read-only.
+    """
+    basis = np.eye(3 * horizon).reshape(3 * horizon, horizon, 3)
+    response = rollout(np.zeros(6), basis, dt).reshape(3 * horizon, (horizon + 1) * 6)
+    response.flags.writeable = False
+    return response
+
+
+def prepare_horizon_cost(
+    z0: np.ndarray,
+    neighbour_trajectories: np.ndarray,
+    reference_preview: np.ndarray,
+    adjacency: np.ndarray,
+    offsets: np.ndarray,
+    weights: CostConfig,
+    dt: float,
+    mirrored: bool = False,
+) -> HorizonCost:
+    """The candidate-independent part of :func:`horizon_cost` (same arguments, no candidates).
+
+    Args:
+        z0: (B, N, 6) measured states at time t [m, m/s].
+        neighbour_trajectories: (B, N, H+1, 6) each UAV's broadcast prediction ẑ_j(k), k = 0..H,
+            seen alike by every receiver; or (B, N, N, H+1, 6) each receiver i's own view of
+            every sender j (``[:, i, j]``), e.g. in i's own frame.
+        reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
+        adjacency: (B, N, N) h_ij, row = receiver.
+        offsets: (N, 6) z^d.
+        weights: q, r, m, n.
+        dt: control step δ [s].
+        mirrored: literal mirrored-offset reading.
+    """
+    per_receiver = neighbour_trajectories.ndim == 5
+    n_uav = offsets.shape[0]
+    send_offsets = (
+        offsets.reshape(1, 1, n_uav, 1, 6) if per_receiver else offsets.reshape(1, n_uav, 1, 6)
+    )
+    others = neighbour_trajectories - relative_offset_sign(mirrored) * send_offsets
+    horizon = reference_preview.shape[-2] - 1
+    return HorizonCost(
+        free=rollout(z0, np.zeros((*z0.shape[:-1], horizon, 3)), dt),
+        response=input_response(horizon, dt),
+        own_offset=z0 - anchored(z0, offsets, mirrored),
+        moments=neighbour_moments(others, adjacency, per_receiver),
+        reference_preview=reference_preview,
+        weights=weights,
+    )
+
+
 def horizon_cost(
     candidates: np.ndarray,
     z0: np.ndarray,
@@ -153,7 +438,8 @@ def horizon_cost(
     Args:
         candidates: (B, N, P, H, 3) candidate u_n sequences of each UAV [m/s^2].
         z0: (B, N, 6) measured states at time t [m, m/s].
-        neighbour_trajectories: (B, N, H+1, 6) each UAV's broadcast prediction ẑ_j(k), k = 0..H.
+        neighbour_trajectories: (B, N, H+1, 6) each UAV's broadcast prediction ẑ_j(k), k = 0..H;
+            or per-receiver views (B, N, N, H+1, 6), see :func:`prepare_horizon_cost`.
         reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
         adjacency: (B, N, N) h_ij, row = receiver.
         offsets: (N, 6) z^d.
@@ -164,14 +450,6 @@ def horizon_cost(
     Returns:
         :class:`CostTerms` of shape (B, N, P).
     """
-    predicted = rollout(z0[:, :, None, :], candidates, dt)  # (B, N, P, H+1, 6)
-    own = anchored(predicted, offsets, mirrored)
-    others = anchored(neighbour_trajectories, offsets, mirrored)
-    pair_sq = formation_error_sq(own, others, adjacency)  # (B, N, P, H+1)
-    velocity_sq = velocity_error_sq(predicted[..., 3:], reference_preview[:, :, None])
-    return CostTerms(
-        formation=weights.q * pair_sq[..., :-1].sum(axis=-1),
-        energy=weights.r * np.einsum("...hk,...hk->...", candidates, candidates),
-        terminal=weights.m * pair_sq[..., -1],
-        velocity=weights.n * velocity_sq.sum(axis=-1),
-    )
+    return prepare_horizon_cost(
+        z0, neighbour_trajectories, reference_preview, adjacency, offsets, weights, dt, mirrored
+    ).terms(candidates)

@@ -1,0 +1,179 @@
+"""What a UAV knows: its own-frame view of the swarm and the plans its neighbours broadcast.
+
+Pure functions behind :class:`~uav_formation_env.policies.dmpc.NashDMPCPolicy`. UAV i sees its
+own velocity, reference, disturbance estimate, time and "avoiding" flag, and per other UAV j the
+neighbour flag h_ij and the relative formation error ``a_j - a_i`` (``a = z - z^d``, see
+:mod:`uav_formation_env.core.observation`). It never sees an absolute position, so it works in its
+own frame: own position 0, own velocity as observed, ``a_j = a_i + (a_j - a_i)``. J_i depends on
+anchored states only through differences, and on the own velocity, so this frame gives the same
+J_i as global coordinates (up to the float32 rounding of the observation).
+
+Plans: UAV i uses the broadcast plan of j only if h_ij = 1 in its own observation; a
+non-neighbour's view is predicted with zero inputs and has weight 0 in J_i.
+
+Shapes: B copies, N UAVs (receivers i and senders j), H horizon steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.core import topology
+from uav_formation_env.core.cost import (
+    HorizonCost,
+    anchored,
+    prepare_horizon_cost,
+    relative_offset_sign,
+)
+from uav_formation_env.core.dynamics import rollout
+from uav_formation_env.core.observation import DecodedObservation, others_index
+
+__all__ = [
+    "HorizonProblems",
+    "OwnFrameViews",
+    "horizon_problems",
+    "observed_time",
+    "own_frame_views",
+    "received_plans",
+    "shift_warm_start",
+]
+
+
+def shift_warm_start(plans: np.ndarray) -> np.ndarray:
+    """The warm start of eq. 20: shift a plan by one step and repeat its last entry.
+
+    Args:
+        plans: (..., H, 3) input sequences u(0..H-1 | t-δ) broadcast at the previous step [m/s^2].
+
+    Returns:
+        (..., H, 3) ``[u(1|t-δ), ..., u(H-1|t-δ), u(H-1|t-δ)]`` (a new array).
+    """
+    plans = np.asarray(plans, dtype=float)
+    return np.concatenate((plans[..., 1:, :], plans[..., -1:, :]), axis=-2)
+
+
+def observed_time(time_fraction: np.ndarray, duration: float, dt: float) -> np.ndarray:
+    """t [s] from the observed t / duration, snapped to the δ grid (the slot is float32).
+
+    Args:
+        time_fraction: (...) observed t / duration.
+        duration: episode length [s].
+        dt: control step δ [s].
+
+    Returns:
+        (...) ``round(t / δ) δ``, the same float the simulator computes as ``steps * δ``.
+    """
+    return np.round(np.asarray(time_fraction, dtype=float) * duration / dt) * dt
+
+
+@dataclass(frozen=True)
+class OwnFrameViews:
+    """Every receiver's picture of the swarm at time t, in its own frame.
+
+    Attributes:
+        z_own: (B, N, 6) own state: position 0, own velocity [m, m/s].
+        views: (B, N_recv, N_send, 6) each sender's state as the receiver sees it (the diagonal is
+            the receiver itself) [m, m/s].
+        adjacency: (B, N_recv, N_send) h_ij from the receiver's own observation.
+    """
+
+    z_own: np.ndarray
+    views: np.ndarray
+    adjacency: np.ndarray
+
+
+def own_frame_views(
+    decoded: DecodedObservation, offsets: np.ndarray, mirrored: bool = False
+) -> OwnFrameViews:
+    """Build every receiver's own-frame states from its observation alone.
+
+    Args:
+        decoded: :func:`~uav_formation_env.core.observation.decode_observations` of (B, N, dim).
+        offsets: (N, 6) formation offsets z^d (mission data).
+        mirrored: literal mirrored-offset reading (as the observation was built).
+    """
+    batch, n = decoded.velocity.shape[:2]
+    rows, others = np.arange(n)[:, None], others_index(n)
+    z_own = np.concatenate((np.zeros((batch, n, 3)), decoded.velocity), axis=-1)
+    a_own = anchored(z_own, offsets, mirrored)  # (B, N, 6)
+    views = np.repeat(a_own[:, :, None], n, axis=2)  # anchored, (B, N_recv, N_send, 6)
+    views[:, rows, others] += decoded.relative_formation_error
+    views += relative_offset_sign(mirrored) * offsets  # states z_j = a_j ± z^d_j
+    adjacency = np.zeros((batch, n, n))
+    adjacency[:, rows, others] = decoded.neighbour
+    return OwnFrameViews(z_own=z_own, views=views, adjacency=adjacency)
+
+
+def received_plans(plans: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
+    """The sequences each receiver assumes for each sender: the sender's plan if h_ij = 1, else 0.
+
+    Args:
+        plans: (B, N_send, H, 3) sequences the senders broadcast (already shifted) [m/s^2].
+        adjacency: (B, N_recv, N_send) h_ij.
+
+    Returns:
+        (B, N_recv, N_send, H, 3) [m/s^2].
+    """
+    return np.where(adjacency[..., None, None] > 0, plans[:, None], 0.0)
+
+
+@dataclass(frozen=True)
+class HorizonProblems:
+    """Every UAV's horizon problem at time t (leading dims (B, N)).
+
+    Attributes:
+        cost: J_i of candidates (B, N, P, H, 3) -> (B, N, P), the one definition of
+            :mod:`uav_formation_env.core.cost`.
+        half_width: (B, N, 3) the search box ``|u_n,c| <= u_max - |u_d,c|`` with
+            ``u_d = -estimate`` (SPEC §1.5), at least 0 [m/s^2].
+    """
+
+    cost: HorizonCost
+    half_width: np.ndarray
+
+
+def horizon_problems(
+    decoded: DecodedObservation, plans: np.ndarray, scenario: Scenario
+) -> HorizonProblems:
+    """Every UAV's J_i against the plans it receives, from its observation and mission data.
+
+    Neighbour predictions are disturbance-free ZOH rollouts of the senders' observed states under
+    their plans. The reference preview is the preset schedule at t + kδ, or the UAV's current
+    reference held over the horizon while its observation says "avoiding" (SPEC §4.3).
+
+    Args:
+        decoded: observations (B, N, dim), decoded.
+        plans: (B, N, H, 3) each sender's sequence as receivers assume it (eq. 20 warm starts, or
+            the previous inner round's outputs) [m/s^2]; only neighbours' rows are used.
+        scenario: mission data: offsets, weights, horizon, δ, duration, u_max, schedule.
+    """
+    offsets = np.asarray(scenario.formation.offsets, dtype=float)
+    mirrored = scenario.formation.mirrored_offsets
+    dt, horizon = scenario.dynamics.dt, scenario.cost.horizon
+    batch, n = decoded.velocity.shape[:2]
+    frame = own_frame_views(decoded, offsets, mirrored)
+    trajectories = rollout(frame.views, received_plans(plans, frame.adjacency), dt)
+    # Each UAV's own time, reference and avoiding flag: a batch of B·N single-UAV previews.
+    preview = topology.reference_preview(
+        scenario.schedule,
+        observed_time(decoded.time_fraction, scenario.duration, dt).reshape(-1),
+        dt,
+        horizon,
+        decoded.reference_velocity.reshape(-1, 1, 3),
+        decoded.avoiding.reshape(-1, 1),
+    ).reshape(batch, n, horizon + 1, 3)
+    cost = prepare_horizon_cost(
+        frame.z_own,
+        trajectories,
+        preview,
+        frame.adjacency,
+        offsets,
+        scenario.cost,
+        dt,
+        mirrored,
+    )
+    half_width = np.maximum(scenario.dynamics.u_max - np.abs(decoded.estimate), 0.0)
+    return HorizonProblems(cost=cost, half_width=half_width)

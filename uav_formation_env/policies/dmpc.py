@@ -1,0 +1,376 @@
+"""Nash-seeking distributed MPC (SPEC §4.3, §5, §6): the paper's reference policy.
+
+Information pattern
+-------------------
+The policy object plays all N distributed controllers of B scenario copies at once, and relays
+their messages. UAV i acts on
+
+- its own observation (:mod:`uav_formation_env.core.observation`): own velocity, reference
+  velocity and "avoiding" flag, disturbance estimate, time, and per other UAV j the neighbour flag
+  h_ij and the relative formation error ``a_j - a_i`` (``a = z - z^d``);
+- mission data every UAV carries: formation offsets z^d, cost weights and horizon, δ, duration,
+  u_max and the preset-velocity schedule (from the scenario);
+- the last broadcast plans of its neighbours (``h_ij = 1`` in its own observation). Plans of other
+  UAVs are never used: a non-neighbour's view is predicted with zero inputs and has weight 0 in J_i.
+
+It never sees absolute positions, the simulator or the environment. UAV i works in its own frame:
+own position 0, own velocity as observed, neighbour j's anchored state = own + the relative
+formation error it observes. J_i only depends on differences of anchored states and on
+``v_i - v^d_i``, so this frame gives the same J_i as global coordinates. The construction of these
+views and of every UAV's horizon problem lives in :mod:`uav_formation_env.policies.broadcast`.
+
+Algorithm per control step, for every UAV i simultaneously (a Jacobi best-response step)
+-----------------------------------------------------------------------------------------
+1. Warm start (eq. 20): ``W_i = [u_i(1|t-δ), ..., u_i(H-1|t-δ), u_i(H-1|t-δ)]`` from i's own last
+   broadcast plan; zeros at t = 0. i shifts each neighbour's received plan the same way (W_j).
+2. Neighbour predictions ẑ_j(k) = disturbance-free ZOH rollout of j's state (as i observes it)
+   under W_j (:func:`~uav_formation_env.core.dynamics.rollout`). Reference preview v^d_i(t + kδ)
+   from the schedule, or i's current reference held over the horizon while it is avoiding.
+3. ``J_pre = J_i(W_i)`` with the one definition of J_i
+   (:func:`~uav_formation_env.core.cost.prepare_horizon_cost`, the same terms as the reward's
+   :func:`~uav_formation_env.core.cost.stage_cost`).
+4. Event trigger: if ``J_pre > threshold`` (10), minimise J_i with PIO / LFPIO / PSO from W_i as the
+   initial global best over the box ``|u_n,c| <= u_max - |u_d,c|`` per axis (SPEC §1.5, with
+   ``u_d = -estimate``); the output is the better of W_i and the best sequence found, so it is
+   never worse than W_i. Otherwise the output is W_i (not triggered, no evaluations). All
+   triggered problems of all copies are gathered into one flat batch and solved by one
+   :func:`~uav_formation_env.policies.optimizers.minimise` call per step. J_i is exactly quadratic
+   in U_i, so by default the populations are evaluated through its quadratic coefficients,
+   identified per step from evaluations of the one definition
+   (:meth:`~uav_formation_env.core.cost.HorizonCost.quadratic`); ``population_cost="direct"``
+   evaluates every population with the full formula instead (same result to ~1e-13).
+5. Apply element 0 (the action is ``u_n(0|t) / u_max``; the plant adds ``u_d``) and broadcast the
+   whole output sequence.
+
+With ``inner_rounds = K > 1`` steps 2-4 repeat K times per step against the neighbours' outputs
+of the previous round (not shifted: same time), each round with the same event trigger. K = 1 is
+the paper's scheme.
+
+All randomness comes from one ``numpy.random.Generator`` seeded with ``seed``. Within one batched
+call UAV i's random draws depend on how many problems come before it in the batch (the triggered
+set); a deployment would give every UAV its own stream.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.core.observation import (
+    DecodedObservation,
+    decode_observations,
+    observation_dim,
+)
+from uav_formation_env.policies.broadcast import (
+    horizon_problems,
+    observed_time,
+    shift_warm_start,
+)
+from uav_formation_env.policies.optimizers import (
+    OPTIMIZERS,
+    LFPIOConfig,
+    PIOConfig,
+    PSOConfig,
+    minimise,
+)
+
+__all__ = ["DEFAULT_THRESHOLD", "DMPCRecords", "NashDMPCPolicy", "shift_warm_start"]
+
+DEFAULT_THRESHOLD = 10.0  # event-trigger threshold on J_i(W) (SPEC §5) [-]
+
+OptimizerLike = str | PIOConfig | LFPIOConfig | PSOConfig
+
+
+def _optimizer_config(optimizer: OptimizerLike) -> PIOConfig | LFPIOConfig | PSOConfig:
+    if isinstance(optimizer, PIOConfig | LFPIOConfig | PSOConfig):
+        return optimizer
+    if isinstance(optimizer, str) and optimizer.lower() in OPTIMIZERS:
+        return OPTIMIZERS[optimizer.lower()]()
+    raise ValueError(
+        f"unknown optimizer {optimizer!r}: expected one of {sorted(OPTIMIZERS)} or a config object"
+    )
+
+
+@dataclass(frozen=True)
+class DMPCRecords:
+    """Per-step records of T steps, B copies and N UAVs.
+
+    Attributes:
+        time: (T, B) time t of the step [s].
+        triggered: (T, B, N) bool, ``J_pre > threshold`` (in any inner round).
+        j_pre: (T, B, N) J_i of the warm start W_i against the neighbours' warm starts [-].
+        j_exec: (T, B, N) J_i of the output sequence (against the last round's plans) [-].
+        evaluations: (T, B, N) the optimiser's cost evaluations (its budget: 1830 for LFPIO,
+            810 for PIO; 0 when not triggered). With ``population_cost="quadratic"`` these are
+            quadratic-form evaluations; identifying the form costs 1 + 2n + n(n-1)/2 = 136 (H = 5)
+            direct evaluations of J_i per triggered UAV, not counted here.
+        wall_time: (T,) wall-clock time of the whole step, all copies and UAVs [s].
+    """
+
+    time: np.ndarray
+    triggered: np.ndarray
+    j_pre: np.ndarray
+    j_exec: np.ndarray
+    evaluations: np.ndarray
+    wall_time: np.ndarray
+
+
+class NashDMPCPolicy:
+    """Distributed MPC in which every UAV best-responds to its neighbours' broadcast plans.
+
+    Acts from observations only (see the module docstring). ``act_batch`` is the core API; ``act``
+    serves the PettingZoo ParallelEnv and ``predict`` stable-baselines3's ``evaluate_policy``.
+
+    Args:
+        scenario: the scenario (or its name, YAML path or mapping): offsets, weights, horizon, δ,
+            duration, u_max and the preset-velocity schedule.
+        optimizer: ``"lfpio"`` (the paper's), ``"pio"``, ``"pso"`` (same budget as LFPIO by
+            default), or a :class:`PIOConfig` / :class:`LFPIOConfig` / :class:`PSOConfig`.
+        seed: seed of the one random generator (same seed and observations, same actions).
+        threshold: event-trigger threshold on J_i(W) [-].
+        inner_rounds: K exchange / re-optimise rounds per step (SPEC §5; 1 = the paper).
+        population_cost: how the optimiser's populations are evaluated: ``"quadratic"`` (J_i's
+            exact quadratic coefficients, identified once per step from the one definition, see
+            :meth:`~uav_formation_env.core.cost.HorizonCost.quadratic`; fast) or ``"direct"``
+            (:meth:`~uav_formation_env.core.cost.HorizonCost.terms` on every population). Both
+            agree to rounding (~1e-13 relative); J_pre, J_exec and the never-worse-than-W check
+            always use the direct evaluation.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario | str | Path | Mapping[str, Any] = "paper",
+        optimizer: OptimizerLike = "lfpio",
+        seed: int | None = None,
+        threshold: float = DEFAULT_THRESHOLD,
+        inner_rounds: int = 1,
+        population_cost: str = "quadratic",
+    ) -> None:
+        if population_cost not in ("quadratic", "direct"):
+            raise ValueError(
+                f"population_cost must be 'quadratic' or 'direct', got {population_cost!r}"
+            )
+        if not isinstance(inner_rounds, int | np.integer) or inner_rounds < 1:
+            raise ValueError(f"inner_rounds must be an integer >= 1, got {inner_rounds!r}")
+        if not np.isfinite(threshold):
+            raise ValueError(f"threshold must be finite, got {threshold!r}")
+        self.scenario = resolve_scenario(scenario)
+        self.optimizer = _optimizer_config(optimizer)
+        self.threshold = float(threshold)
+        self.inner_rounds = int(inner_rounds)
+        self.population_cost = population_cost
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        sc = self.scenario
+        self.n_uav = sc.n_uav
+        self.horizon = sc.cost.horizon
+        self.dt = sc.dynamics.dt
+        self.u_max = sc.dynamics.u_max
+        self.obs_dim = observation_dim(self.n_uav)
+        self.agents = [f"uav_{i}" for i in range(self.n_uav)]
+        self._plans: np.ndarray | None = None  # (B, N, H, 3) last broadcast plans [m/s^2]
+        self._records: list[tuple[np.ndarray, ...]] = []
+        self._wall: list[float] = []
+
+    # ------------------------------------------------------------------ state
+    def reset(self, batch_size: int = 1, seed: int | None = None) -> None:
+        """Clear the broadcast plans (so W = 0 at the next step) and the records.
+
+        Called automatically when every copy's observation shows t = 0 (or when B changes);
+        copies that restart alone only have their plans cleared.
+
+        Args:
+            batch_size: number of scenario copies B.
+            seed: if given, re-seed the random generator.
+        """
+        if not isinstance(batch_size, int | np.integer) or batch_size < 1:
+            raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        if seed is not None:
+            self.seed = seed
+            self.rng = np.random.default_rng(seed)
+        self._plans = np.zeros((int(batch_size), self.n_uav, self.horizon, 3))
+        self._records = []
+        self._wall = []
+
+    @property
+    def plans(self) -> np.ndarray:
+        """(B, N, H, 3) the sequences every UAV broadcast at the last step [m/s^2] (a copy)."""
+        if self._plans is None:
+            raise RuntimeError("no plans yet: call reset() or act first")
+        return self._plans.copy()
+
+    @plans.setter
+    def plans(self, value: np.ndarray) -> None:
+        value = np.array(value, dtype=float)
+        if value.ndim != 4 or value.shape[1:] != (self.n_uav, self.horizon, 3):
+            raise ValueError(
+                f"plans must have shape (B, {self.n_uav}, {self.horizon}, 3), got {value.shape}"
+            )
+        self._plans = value
+
+    def warm_starts(self) -> np.ndarray:
+        """(B, N, H, 3) every UAV's warm start W_i for the next step (eq. 20) [m/s^2]."""
+        return shift_warm_start(self.plans)
+
+    # ------------------------------------------------------------------ acting
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        """One control step of every UAV of every copy.
+
+        Args:
+            obs: (B, N, dim) observations of :func:`~uav_formation_env.core.observation.
+                build_observations` (agent order uav_0..uav_{N-1}).
+
+        Returns:
+            (B, N, 3) normalised actions ``u_n(0|t) / u_max`` in [-1, 1].
+        """
+        start = time.perf_counter()
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.ndim != 3 or obs.shape[1:] != (self.n_uav, self.obs_dim):
+            raise ValueError(
+                f"obs must have shape (B, {self.n_uav}, {self.obs_dim}), got {obs.shape}"
+            )
+        decoded = decode_observations(obs, self.n_uav)
+        self._restart(decoded.time_fraction[:, 0] == 0.0)
+        assert self._plans is not None
+        output, triggered, j_pre, j_exec, evals = self._solve(decoded, self._plans)
+        self._plans = output
+        t = observed_time(decoded.time_fraction[:, 0], self.scenario.duration, self.dt)
+        self._records.append((t, triggered, j_pre, j_exec, evals))
+        self._wall.append(time.perf_counter() - start)
+        return np.clip(output[..., 0, :] / self.u_max, -1.0, 1.0)
+
+    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """ParallelEnv convenience: one copy (B = 1), agents ``uav_0 .. uav_{N-1}``.
+
+        Args:
+            observations: agent -> (dim,) observation; every agent must be present.
+
+        Returns:
+            agent -> (3,) float32 normalised action.
+        """
+        missing = [a for a in self.agents if a not in observations]
+        if missing:
+            raise KeyError(f"observations lack agents {missing}")
+        obs = np.stack([np.asarray(observations[a]) for a in self.agents])[None]
+        actions = self.act_batch(obs)[0].astype(np.float32)
+        return {a: actions[i] for i, a in enumerate(self.agents)}
+
+    def predict(
+        self,
+        observation: np.ndarray,
+        state: Any = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, Any]:
+        """stable-baselines3 interface (``evaluate_policy``) over a per-agent vector env.
+
+        Args:
+            observation: (B·N, dim), stacked per (copy, agent): B copies of N agents.
+            state: passed through (the plans live in the policy object).
+            episode_start: (B·N,) bool; copies whose agents all start an episode have their
+                plans cleared (t = 0 in the observation does the same).
+            deterministic: ignored; the policy is deterministic given its seed.
+
+        Returns:
+            ``(actions, state)`` with actions (B·N, 3) float32 in [-1, 1].
+        """
+        obs = np.asarray(observation)
+        if obs.ndim != 2 or obs.shape[0] % self.n_uav or obs.shape[1] != self.obs_dim:
+            raise ValueError(
+                f"observation must have shape (B*{self.n_uav}, {self.obs_dim}), got {obs.shape}"
+            )
+        obs = obs.reshape(-1, self.n_uav, self.obs_dim)
+        if episode_start is not None and self._plans is not None:
+            starts = np.asarray(episode_start, dtype=bool).reshape(-1, self.n_uav).all(axis=1)
+            if starts.shape[0] == self._plans.shape[0]:
+                self._plans[starts] = 0.0
+        actions = self.act_batch(obs)
+        return actions.reshape(-1, 3).astype(np.float32), state
+
+    # ------------------------------------------------------------------ records
+    def records(self) -> DMPCRecords:
+        """The per-step records since the last (automatic) reset, as arrays."""
+        batch = 1 if self._plans is None else self._plans.shape[0]
+        n = self.n_uav
+        if not self._records:
+            empty = np.zeros((0, batch, n))
+            return DMPCRecords(
+                time=np.zeros((0, batch)),
+                triggered=empty.astype(bool),
+                j_pre=empty,
+                j_exec=empty.copy(),
+                evaluations=empty.astype(np.int64),
+                wall_time=np.zeros(0),
+            )
+        t, trig, pre, exe, evals = (np.stack(x) for x in zip(*self._records))
+        return DMPCRecords(t, trig, pre, exe, evals, np.asarray(self._wall))
+
+    def trigger_counts(self) -> np.ndarray:
+        """(B, N) number of triggered steps per copy and UAV since the last reset."""
+        return self.records().triggered.sum(axis=0)
+
+    # ------------------------------------------------------------------ internals
+    def _restart(self, restart: np.ndarray) -> None:
+        batch = restart.shape[0]
+        if self._plans is None or self._plans.shape[0] != batch or restart.all():
+            self.reset(batch)
+        elif restart.any():
+            self._plans[restart] = 0.0
+
+    def _solve(
+        self, decoded: DecodedObservation, plans: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Warm start, trigger and batched optimisation of every UAV (K rounds).
+
+        Returns:
+            ``(output (B, N, H, 3), triggered, j_pre, j_exec, evaluations)``, the last four
+            (B, N).
+        """
+        h = self.horizon
+        current = shift_warm_start(plans)  # W_i, and W_j as the receivers compute it
+        shape = current.shape[:2]
+        triggered = np.zeros(shape, dtype=bool)
+        evals = np.zeros(shape, dtype=np.int64)
+        j_pre = j_cur = np.zeros(shape)
+        for round_ in range(self.inner_rounds):
+            problems = horizon_problems(decoded, current, self.scenario)
+            j_cur = problems.cost.terms(current[:, :, None]).total[..., 0]
+            if round_ == 0:
+                j_pre = j_cur
+            trig = j_cur > self.threshold
+            triggered |= trig
+            index = np.flatnonzero(trig)
+            if index.size == 0:
+                continue
+            sub = problems.cost.take(index)  # the M triggered problems as one copy
+            if self.population_cost == "quadratic":
+                population_cost = sub.quadratic().total
+            else:
+                population_cost = sub.terms_total
+            x0 = current.reshape(-1, h, 3)[index]
+            half = problems.half_width.reshape(-1, 3)[index][:, None, :]  # (M, 1, 3)
+            result = minimise(
+                lambda x, f=population_cost: f(x[None])[0],
+                x0,
+                -half,
+                half,
+                self.rng,
+                self.optimizer,
+            )
+            # Exact J_i of the optimiser's best; keep W where it is not strictly better.
+            found = sub.terms(result.x[None, :, None]).total[0, :, 0]
+            better = found < j_cur.reshape(-1)[index]
+            flat = current.reshape(-1, h, 3).copy()
+            flat[index[better]] = result.x[better]
+            current = flat.reshape(current.shape)
+            j_cur = j_cur.copy()
+            j_cur.reshape(-1)[index[better]] = found[better]
+            evals.reshape(-1)[index] += result.n_evals
+        return current, triggered, j_pre, j_cur, evals
