@@ -33,8 +33,7 @@ from uav_formation_env.core.observer import (
     compensation,
     disturbance_estimate,
     observer_init,
-    observer_step,
-    tick_velocities,
+    observer_step_held,
 )
 
 NOISE_BLOCK = 100  # control steps of disturbance noise drawn per Generator call
@@ -206,9 +205,8 @@ class FormationSim:
         d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust)
         a = u + d
         if obs_cfg.enabled:
-            ticks = tick_velocities(self.z[..., 3:], a, self.dt, obs_cfg.substeps)
-            self.observer = observer_step(
-                self.observer, ticks, u, self.dt / obs_cfg.substeps, obs_cfg
+            self.observer = observer_step_held(
+                self.observer, self.z[..., 3:], a, u, self.dt, obs_cfg
             )
         self.z = zoh_step(self.z, a, self.dt)
         self.steps += 1

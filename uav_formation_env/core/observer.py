@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from uav_formation_env.config import ObserverConfig
+from uav_formation_env.core import observer_kernel
 
 
 @dataclass
@@ -120,6 +121,54 @@ def observer_step(
             d_hat += linear_gain * surface
         d_hat += switch_gain * np.sign(surface, out=surface)
     return ObserverState(v_hat, s0, d_hat, e_prev)
+
+
+def observer_step_held(
+    state: ObserverState,
+    v0: np.ndarray,
+    accel: np.ndarray,
+    u_applied: np.ndarray,
+    dt: float,
+    config: ObserverConfig,
+    compiled: bool | None = None,
+) -> ObserverState:
+    """One control step of the observer for a plant with ``accel`` held (exact tick velocities).
+
+    Uses the compiled kernel of :mod:`~uav_formation_env.core.observer_kernel` when numba is
+    installed (same arithmetic, same numbers), else :func:`observer_step` on
+    :func:`tick_velocities`.
+
+    Args:
+        state: current observer state, arrays (..., 3).
+        v0: (..., 3) velocity at the start of the step [m/s].
+        accel: (..., 3) held total acceleration u + d [m/s^2].
+        u_applied: (..., 3) applied input [m/s^2].
+        dt: control step [s].
+        config: observer gains (``substeps`` ticks per step).
+        compiled: force the kernel (True) or the numpy loop (False); None picks the kernel if
+            available.
+    """
+    use_kernel = observer_kernel.AVAILABLE if compiled is None else compiled
+    if not use_kernel:
+        ticks = tick_velocities(v0, accel, dt, config.substeps)
+        return observer_step(state, ticks, u_applied, dt / config.substeps, config)
+    new = state.copy()
+    c = config
+    gains = np.array([c.pi1, c.lambda1, c.pi2, c.lambda2, c.eta, c.rho])
+    flat = [np.ascontiguousarray(a, dtype=float).reshape(-1) for a in (v0, accel, u_applied)]
+    observer_kernel.compiled_step(
+        *flat,
+        float(dt),
+        int(c.substeps),
+        new.v_hat.reshape(-1),
+        new.s0.reshape(-1),
+        new.d_hat.reshape(-1),
+        new.e_prev.reshape(-1),
+        gains,
+        bool(c.literal_sign_law),
+        bool(c.lambda1 == 2.0 and c.lambda2 == 1.5),
+    )
+    return new
 
 
 def disturbance_estimate(state: ObserverState, config: ObserverConfig) -> np.ndarray:
