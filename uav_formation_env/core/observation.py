@@ -97,9 +97,9 @@ def build_observations(
         rel = obstacle_centers[None, None] - z[:, :, None, :2]  # (B, N, O, 2)
         centre_dist = np.sqrt(np.einsum("bnok,bnok->bno", rel, rel))
         nearest = (centre_dist - obstacle_radii).argmin(axis=-1)  # (B, N)
-        pick = np.take_along_axis(rel, nearest[..., None, None], axis=2)[:, :, 0]
-        surface = np.take_along_axis(centre_dist, nearest[..., None], axis=2)[..., 0]
-        surface = surface - obstacle_radii[nearest]
+        rows, cols = np.indices(nearest.shape)
+        pick = rel[rows, cols, nearest]  # (B, N, 2)
+        surface = centre_dist[rows, cols, nearest] - obstacle_radii[nearest]
         own[..., 14:16] = np.clip(pick / DISTANCE_SCALE, -DISTANCE_CLIP, DISTANCE_CLIP)
         own[..., 16] = np.clip(surface / DISTANCE_SCALE, -DISTANCE_CLIP, DISTANCE_CLIP)
         own[..., 17] = 1.0
@@ -109,9 +109,7 @@ def build_observations(
     index = others_index(n_uav)  # (N, N-1)
     relative = a[:, index] - a[:, :, None]  # (B, N, N-1, 6)
     other = np.empty((batch, n_uav, n_uav - 1, OTHER_DIM))
-    other[..., 0] = np.take_along_axis(
-        adjacency, np.broadcast_to(index, adjacency.shape[:1] + index.shape), axis=2
-    )
+    other[..., 0] = adjacency[:, np.arange(n_uav)[:, None], index]
     other[..., 1:4] = relative[..., :3] / FORMATION_SCALE
     other[..., 4:7] = relative[..., 3:] / VELOCITY_SCALE
     flat = np.concatenate((own, other.reshape(batch, n_uav, -1)), axis=-1)

@@ -199,6 +199,12 @@ def reset_topology(state: TopologyState, mask: np.ndarray) -> TopologyState:
     return TopologyState(**fields)
 
 
+def _copy_state(state: TopologyState) -> TopologyState:
+    return TopologyState(
+        **{name: getattr(state, name).copy() for name in TopologyState.__dataclass_fields__}
+    )
+
+
 def _batch_last(x: np.ndarray) -> np.ndarray:
     """(B, ...) -> a contiguous copy laid out (..., B)."""
     return np.moveaxis(x, 0, -1).copy()
@@ -249,6 +255,13 @@ def update_topology(
         return state, _idle_output(preset, h0, batch, n_uav, n_obs)
 
     centres, r_safe, r_detect = obstacle_arrays(avoidance)
+    if not (state.status == ACTIVE).any():
+        # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
+        # detection radius, so nothing can activate (activation needs min_i D_i < d^o).
+        rel = positions[:, :, None, :2] - centres  # (B, N, O, 2)
+        near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect**2) & (state.status == IDLE)
+        if not near_idle.any():
+            return _copy_state(state), _idle_output(preset, h0, batch, n_uav, n_obs)
     e_hat, _ = heading_frame(preset)
     rel_x, rel_y, dist, lon, lat = relative_geometry(positions, centres, e_hat)  # (O, N, B)
     near = in_range(lon, lat, r_safe[:, None, None])
