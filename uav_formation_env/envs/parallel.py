@@ -208,28 +208,36 @@ class UAVFormationParallelEnv(ParallelEnv):
 
     def _infos(self, penalty: np.ndarray) -> dict[str, dict]:
         r = self._result
-        terms = {name: value[0] for name, value in r.cost.as_dict().items()}
-        adjacency = r.adjacency[0]
         names = self.possible_agents
-        infos = {}
-        for i, agent in enumerate(names):
-            infos[agent] = {
-                "J": float(r.cost.total[0, i]),
-                "cost_terms": {name: float(value[i]) for name, value in terms.items()},
-                "disturbance": r.disturbance[0, i].copy(),
-                "disturbance_estimate": r.estimate[0, i].copy(),
-                "reference_velocity": r.reference_velocity[0, i].copy(),
-                "group": int(r.groups[0, i]),
-                "neighbours": [names[j] for j in np.flatnonzero(adjacency[i])],
-                "obstacle_distance": float(r.obstacle_distance[0, i]),
-                "min_separation": float(r.min_separation[0, i]),
-                "collision": bool(r.collision[0, i]),
-                "position": r.z[0, i, :3].copy(),
-                "velocity": r.z[0, i, 3:].copy(),
-                "penalty": float(penalty[i]),
-                "t": float(r.t[0]),
+        # one conversion per quantity, then per-agent views: this runs every step
+        total = r.cost.total[0].tolist()
+        terms = {name: value[0].tolist() for name, value in r.cost.as_dict().items()}
+        receives = (r.adjacency[0] != 0).tolist()
+        z = r.z[0].copy()
+        disturbance, estimate = r.disturbance[0].copy(), r.estimate[0].copy()
+        reference = r.reference_velocity[0].copy()
+        groups, collision = r.groups[0].tolist(), r.collision[0].tolist()
+        obstacle, separation = r.obstacle_distance[0].tolist(), r.min_separation[0].tolist()
+        penalty, t = penalty.tolist(), float(r.t[0])
+        return {
+            agent: {
+                "J": total[i],
+                "cost_terms": {name: values[i] for name, values in terms.items()},
+                "disturbance": disturbance[i],
+                "disturbance_estimate": estimate[i],
+                "reference_velocity": reference[i],
+                "group": groups[i],
+                "neighbours": [names[j] for j, flag in enumerate(receives[i]) if flag],
+                "obstacle_distance": obstacle[i],
+                "min_separation": separation[i],
+                "collision": collision[i],
+                "position": z[i, :3],
+                "velocity": z[i, 3:],
+                "penalty": penalty[i],
+                "t": t,
             }
-        return infos
+            for i, agent in enumerate(names)
+        }
 
     def state(self) -> np.ndarray:
         """Global state (see the module docstring)."""
