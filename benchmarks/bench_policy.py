@@ -8,6 +8,10 @@ Seeds run one after another as B = 1 episodes, or all at once as B copies with `
 
     python benchmarks/bench_policy.py [--optimizers lfpio pio] [--observer on off]
                                       [--seeds 0 1] [--batched] [--steps 1000]
+                                      [--set cost.separation=0 ...] [--numpy]
+
+``--set`` overrides scenario fields (YAML values, e.g. ``--set cost.separation=0`` flies the paper's
+J_i without the separation term); ``--numpy`` runs LFPIO without the compiled kernels.
 """
 
 from __future__ import annotations
@@ -16,10 +20,12 @@ import argparse
 import time
 
 import numpy as np
+import yaml
 
 from uav_formation_env.config_io import paper_scenario, with_overrides
 from uav_formation_env.core.observation import build_observations
 from uav_formation_env.core.obstacles import obstacle_distances
+from uav_formation_env.policies import optimizers
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
 from uav_formation_env.sim import FormationSim, StepResult
 
@@ -43,10 +49,15 @@ def observe(sim: FormationSim, result: StepResult) -> np.ndarray:
 
 
 def episode(
-    optimizer: str, observer: bool, seeds: list[int], steps: int, population_cost: str
+    optimizer: str,
+    observer: bool,
+    seeds: list[int],
+    steps: int,
+    population_cost: str,
+    overrides: dict | None = None,
 ) -> dict:
     """Run B = len(seeds) copies for ``steps`` control steps; return the measurements."""
-    scenario = with_overrides(paper_scenario(), {"observer.enabled": observer})
+    scenario = with_overrides(paper_scenario(), {**(overrides or {}), "observer.enabled": observer})
     sim = FormationSim(scenario, batch_size=len(seeds))
     policy = NashDMPCPolicy(
         scenario, optimizer=optimizer, seed=seeds[0], population_cost=population_cost
@@ -84,7 +95,14 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=1000)
     parser.add_argument("--batched", action="store_true", help="all seeds as B copies at once")
     parser.add_argument("--population-cost", default="quadratic", choices=["quadratic", "direct"])
+    parser.add_argument(
+        "--set", nargs="*", default=[], metavar="KEY=VALUE", help="scenario overrides"
+    )
+    parser.add_argument("--numpy", action="store_true", help="LFPIO without compiled kernels")
     args = parser.parse_args()
+    if args.numpy:  # as if numba were missing (UAV_FORMATION_NO_NUMBA=1 before the import)
+        optimizers.COMPILED_AVAILABLE = False
+    overrides = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in args.set)}
     groups = [args.seeds] if args.batched else [[s] for s in args.seeds]
     print(
         f"{'optimizer':>9} {'obs':>3} {'seeds':>10} {'s/episode':>9} {'ms/step':>8} "
@@ -94,7 +112,9 @@ def main() -> None:
     for optimizer in args.optimizers:
         for observer in args.observer:
             for seeds in groups:
-                out = episode(optimizer, observer == "on", seeds, args.steps, args.population_cost)
+                out = episode(
+                    optimizer, observer == "on", seeds, args.steps, args.population_cost, overrides
+                )
                 b = len(seeds)
                 per_episode = out["wall"] / b * 1000 / args.steps
                 per_step = 1e3 * out["wall"] / args.steps / b

@@ -49,6 +49,8 @@ def test_paper_default_scenario() -> None:
     assert s.dynamics.u_max == 5.0
     c = s.cost
     assert (c.q, c.r, c.m, c.n, c.horizon) == (1.0, 5.0, 1.0, 10.0, 5)
+    # separation term (not in the paper, docs/deviations.md §5): s [1/m^2], d_s [m]
+    assert (c.separation, c.separation_distance) == (30.0, 10.0)
     assert s.formation.offsets == (
         (0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
         (-10.0, 20.0, 0.0, 0.0, 0.0, 0.0),
@@ -261,6 +263,13 @@ INVALID: list[tuple[str, dict[str, Any], str]] = [
     ("negative m", {"cost": {"m": -2.0}}, r"cost\.m'"),
     ("negative n", {"cost": {"n": -10.0}}, r"cost\.n'"),
     ("horizon 0", {"cost": {"horizon": 0}}, r"cost\.horizon'"),
+    ("negative separation", {"cost": {"separation": -1.0}}, r"cost\.separation'.*>= 0"),
+    (
+        "negative separation distance",
+        {"cost": {"separation_distance": -8.0}},
+        r"cost\.separation_distance'.*>= 0",
+    ),
+    ("nan separation", {"cost": {"separation": float("nan")}}, r"cost\.separation'.*finite"),
     (
         "overlapping obstacles",
         {"avoidance": {"obstacles": [{"center": [0, 0]}, {"center": [100, 0]}]}},
@@ -332,6 +341,7 @@ def test_boundary_values_are_accepted() -> None:
     ok = AvoidanceConfig(obstacles=(ObstacleConfig((0.0, 0.0)), ObstacleConfig((140.0, 0.0))))
     assert len(ok.obstacles) == 2
     assert CostConfig(q=0.0, r=0.0, m=0.0, n=0.0).q == 0.0
+    assert CostConfig(separation=0.0, separation_distance=0.0).separation == 0.0  # paper's J_i
     assert ObserverConfig(lambda2=1.01, lambda1=1.02).lambda2 == 1.01
     assert ObserverConfig(lambda2=1.99, lambda1=2.0).lambda2 == 1.99
     assert Scenario(duration=0.2).n_steps == 1

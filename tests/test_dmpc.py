@@ -188,7 +188,8 @@ def test_search_box_respects_the_compensation() -> None:
 @pytest.mark.parametrize("mirrored", [False, True])
 def test_j_pre_equals_horizon_cost_on_global_data(mirrored: bool) -> None:
     """The policy's J_pre (own frame, float32 observations) = horizon_cost in global coordinates,
-    including steps with an avoidance reference held over the horizon."""
+    including steps with an avoidance reference held over the horizon. Receiver i predicts a
+    neighbour with its plan and any other UAV (for the separation term) with zero inputs."""
     scenario = with_overrides(paper_scenario(), {"formation.mirrored_offsets": mirrored})
     sim = FormationSim(scenario)
     sim.reset(seed=0)
@@ -198,7 +199,8 @@ def test_j_pre_equals_horizon_cost_on_global_data(mirrored: bool) -> None:
     for _ in range(60):
         w = np.zeros((1, 5, 5, 3)) if sim.t[0] == 0.0 else policy.warm_starts()
         r = sim.last
-        neighbours = rollout(r.z[:, :, None], w[:, :, None], dt)[:, :, 0]
+        plans = np.where(r.adjacency[..., None, None] > 0, w[:, None], 0.0)  # (B, i, j, H, 3)
+        neighbours = rollout(np.broadcast_to(r.z[:, None], plans.shape[:3] + (6,)), plans, dt)
         expected = horizon_cost(
             w[:, :, None],
             r.z,
@@ -469,3 +471,91 @@ def test_prepared_cost_prediction_take_and_quadratic() -> None:
     np.testing.assert_allclose(
         quadratic.take(index).total(flat)[0], exact.reshape(10, 6)[index], rtol=1e-11
     )
+
+
+# ------------------------------------------------------------------------------------------------
+# separation term in the MPC (docs/deviations.md §5)
+# ------------------------------------------------------------------------------------------------
+
+
+def close_start(scenario, gap: float = 3.0) -> tuple[FormationSim, np.ndarray, np.ndarray]:
+    """t = 0 with UAV 3 (index 2, not a neighbour of UAV 1) put ``gap`` m beside UAV 1.
+
+    Returns the sim, the observations and the states they were built from.
+    """
+    sim = FormationSim(scenario)
+    sim.reset(seed=0)
+    r, sc = sim.last, scenario
+    z = r.z.copy()
+    z[0, 2, :3] = z[0, 0, :3] + np.array([0.0, gap, 0.0])
+    obs = build_observations(
+        z,
+        r.reference_velocity,
+        r.estimate,
+        r.adjacency,
+        r.avoiding,
+        r.t / sc.duration,
+        sim.offsets,
+        sim.obstacle_centers,
+        sim.obstacle_radii,
+        r.min_separation,
+        sc.formation.mirrored_offsets,
+    )
+    return sim, obs, z
+
+
+def test_j_pre_contains_the_separation_term_of_every_sensed_uav() -> None:
+    """At t = 0 (W = 0, equal velocities) every UAV's prediction keeps its distances, so the
+    separation term of receiver i is s (H+1) Σ_{j≠i} max(0, d_s - d_ij)² over ALL j, neighbours
+    or not; it is the only difference to the paper's J_i."""
+    on = paper_scenario()
+    off = with_overrides(on, {"cost.separation": 0.0})
+    _, obs, z = close_start(on)
+    assert obs[0, 0, 19 + 7 * 1] == 0.0  # UAV 3 is not a neighbour of UAV 1
+    j_pre = {}
+    for name, scenario in (("on", on), ("off", off)):
+        policy = NashDMPCPolicy(scenario, seed=0, threshold=NEVER)
+        policy.act_batch(obs)
+        j_pre[name] = policy.records().j_pre[0, 0]
+    p = z[0, :, :3]
+    d = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(5, np.inf))
+    c = on.cost
+    expected = c.separation * (c.horizon + 1) * (np.maximum(c.separation_distance - d, 0) ** 2)
+    expected = expected.sum(axis=1)
+    assert expected[0] >= c.separation * 6 * 25.0 and expected[2] > 0  # the pair we placed
+    np.testing.assert_allclose(j_pre["on"] - j_pre["off"], expected, rtol=1e-5, atol=1e-3)
+
+
+def test_population_costs_agree_with_the_separation_term_active() -> None:
+    scenario = paper_scenario()
+    _, obs, _ = close_start(scenario, gap=2.5)
+    out = {}
+    for mode in ("quadratic", "direct"):
+        policy = NashDMPCPolicy(scenario, seed=0, threshold=ALWAYS, population_cost=mode)
+        out[mode] = (policy.act_batch(obs), policy.records().j_exec, policy.plans)
+    np.testing.assert_allclose(out["quadratic"][0], out["direct"][0], atol=1e-7)
+    np.testing.assert_allclose(out["quadratic"][1], out["direct"][1], rtol=1e-9)
+    # the two UAVs we placed 2.5 m apart are pushed apart along y by their first inputs
+    first = out["quadratic"][2][0, :, 0]
+    assert first[0, 1] < 0.0 < first[2, 1]
+
+
+def test_separation_prevents_the_start_collisions() -> None:
+    """Seed 1 of the paper scenario: with the paper's J_i two UAVs come within 2 m while the swarm
+    converges from the random start box (observer off, LFPIO); with the separation term they do
+    not. 60 steps (12 s) cover the convergence."""
+    closest = {}
+    for name, separation in (("paper", 0.0), ("ours", CostConfig().separation)):
+        scenario = with_overrides(
+            paper_scenario(), {"observer.enabled": False, "cost.separation": separation}
+        )
+        sim = FormationSim(scenario)
+        policy = NashDMPCPolicy(scenario, seed=1)
+        sim.reset(seed=1)
+        low = np.inf
+        for _ in range(60):
+            sim.step(policy.act_batch(observe(sim)) * sim.u_max)
+            low = min(low, float(sim.last.min_separation.min()))
+        closest[name] = low
+    assert closest["paper"] < scenario.collision.uav_distance
+    assert closest["ours"] > scenario.collision.uav_distance

@@ -45,7 +45,7 @@ INFO_TYPES = {
     "t": float,
 }
 VECTOR_INFOS = ("disturbance", "disturbance_estimate", "reference_velocity", "position", "velocity")
-COST_TERMS = {"formation", "energy", "terminal", "velocity"}
+COST_TERMS = {"formation", "energy", "terminal", "velocity", "separation"}
 
 # (n_uav, obstacles, observer, collision_mode): observer on/off, obstacles none/paper/random,
 # collision none/penalty/terminate and N = 3, 5, 8 all appear.

@@ -21,7 +21,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
+from uav_formation_env.policies import optimizers
 from uav_formation_env.policies.optimizers import (
+    COMPILED_AVAILABLE,
     OPTIMIZERS,
     LFPIOConfig,
     PIOConfig,
@@ -281,11 +283,15 @@ def test_lfpio_keeps_the_better_of_its_two_candidates() -> None:
         assert _on_segment(next_cand[i], kept[i], best)
 
 
+@pytest.mark.parametrize("compiled", [False, None])
 @pytest.mark.parametrize("name", ["pio", "lfpio", "pso"])
-def test_seeded_determinism(name: str) -> None:
+def test_seeded_determinism(name: str, compiled: bool | None) -> None:
     cost, x0, _ = quadratic_problems(seed=6, batch=4, dims=DIMS, condition=10.0)
     config = replace(CONFIGS[name], per_dimension_rand=True)
-    runs = [minimise(cost, x0, -5.0, 5.0, np.random.default_rng(s), config) for s in (7, 7, 8)]
+    runs = [
+        minimise(cost, x0, -5.0, 5.0, np.random.default_rng(s), config, compiled=compiled)
+        for s in (7, 7, 8)
+    ]
     np.testing.assert_array_equal(runs[0].x, runs[1].x)
     np.testing.assert_array_equal(runs[0].cost, runs[1].cost)
     assert not np.array_equal(runs[0].x, runs[2].x)
@@ -361,7 +367,11 @@ def test_levy_numerator_is_gaussian_and_steps_are_its_ratio() -> None:
     assert stats.kstest(nu, "norm").pvalue > 1e-3
     assert np.std(mu) == pytest.approx(sigma, rel=0.01)
     steps = levy_steps(np.random.default_rng(0), 100_000)
-    np.testing.assert_array_equal(steps, mu / np.abs(nu) ** (1 / 1.5))
+    # β = 1.5 computes |nu|^(2/3) as cbrt(nu²): the same to an ulp or two (1/1.5 is not 2/3).
+    np.testing.assert_allclose(steps, mu / np.abs(nu) ** (1 / 1.5), rtol=2e-15, atol=0)
+    mu, nu = mantegna_components(np.random.default_rng(0), 1000, 1.3)
+    steps = levy_steps(np.random.default_rng(0), 1000, 1.3)  # other β: the power itself
+    np.testing.assert_array_equal(steps, mu / np.abs(nu) ** (1 / 1.3))
     assert levy_steps(np.random.default_rng(0), (2, 4, 3)).shape == (2, 4, 3)
 
 
@@ -420,3 +430,79 @@ def test_registry_and_bad_arguments() -> None:
         minimise(cost, x0, 5.0, -5.0, np.random.default_rng(0), PIOConfig())
     with pytest.raises(ValueError, match="shape"):
         minimise(lambda x: cost(x)[0], x0, -5.0, 5.0, np.random.default_rng(0), PIOConfig())
+
+
+# ------------------------------------------------------------------------------------------------
+# compiled LFPIO bookkeeping (numba, the [fast] extra): the same numbers as the numpy code
+# ------------------------------------------------------------------------------------------------
+
+
+def _recording(cost, calls: list[np.ndarray]):
+    def wrapped(x: np.ndarray) -> np.ndarray:
+        calls.append(x.copy())
+        return cost(x)
+
+    return wrapped
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        LFPIOConfig(),
+        LFPIOConfig(per_dimension_rand=True),
+        LFPIOConfig(center_divide_by_np=True, levy_scale=0.5),
+        LFPIOConfig(levy_beta=1.3),
+        LFPIOConfig(n_pigeons=7, iters=4),
+        LFPIOConfig(n_pigeons=150, iters=3),  # > 128 pigeons: the pairwise sum halves
+    ],
+)
+@pytest.mark.parametrize(
+    ("batch", "dims"), [((4,), DIMS), ((), DIMS), ((2, 3), (4,)), ((3,), (2,))]
+)
+def test_compiled_lfpio_equals_numpy_bit_for_bit(config, batch, dims) -> None:
+    if not COMPILED_AVAILABLE:
+        pytest.skip("numba not installed (the [fast] extra)")
+    rng = np.random.default_rng(12)
+    n = math.prod(dims)
+    centre = rng.uniform(-2.0, 2.0, (*batch, *dims))
+    x0 = rng.uniform(-5.0, 5.0, (*batch, *dims))
+    low = rng.uniform(-5.0, -1.0, x0.shape)
+    bd = len(batch)
+
+    def cost(x: np.ndarray) -> np.ndarray:
+        d = (x - np.expand_dims(centre, bd)).reshape(*x.shape[: bd + 1], n)
+        value = (d**2).sum(-1) + np.abs(d).sum(-1)
+        value[..., ::7] = np.nan  # NaN is read as +inf by both paths
+        return value
+
+    results, calls = {}, {}
+    for compiled in (False, True):
+        calls[compiled] = []
+        results[compiled] = minimise(
+            _recording(cost, calls[compiled]),
+            x0,
+            low,
+            low + 6.0,
+            np.random.default_rng(9),
+            config,
+            batch_ndim=bd,
+            compiled=compiled,
+        )
+    a, b = results[False], results[True]
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.cost, b.cost)
+    np.testing.assert_array_equal(a.initial_cost, b.initial_cost)
+    assert a.n_evals == b.n_evals == n_evaluations(config)
+    assert len(calls[False]) == len(calls[True]) == 1 + config.iters
+    for x_numpy, x_compiled in zip(calls[False], calls[True], strict=True):
+        np.testing.assert_array_equal(x_numpy, x_compiled)  # every population, not only the end
+
+
+def test_compiled_true_without_numba_raises(monkeypatch) -> None:
+    monkeypatch.setattr(optimizers, "COMPILED_AVAILABLE", False)
+    cost, x0, _ = quadratic_problems(seed=0, batch=2, dims=DIMS, condition=1.0)
+    with pytest.raises(RuntimeError, match="numba"):
+        minimise(cost, x0, -5.0, 5.0, np.random.default_rng(0), LFPIOConfig(), compiled=True)
+    # compiled=None falls back to numpy
+    result = minimise(cost, x0, -5.0, 5.0, np.random.default_rng(0), LFPIOConfig())
+    assert result.n_evals == 1830

@@ -1,4 +1,13 @@
-"""The ``uav-formation`` command line."""
+"""The ``uav-formation`` command line.
+
+- ``uav-formation reproduce --seeds 5 --out results/paper``: the paper's four variants
+  ({PIO, LFPIO} x {NFTSMO off, on}) on the same seeds: Table 2, Figs. 5-9, summary and report
+  (:mod:`uav_formation_env.reproduce`).
+- ``uav-formation evaluate --policy lfpio --observer on --seeds 5 --out results/eval``: one policy
+  (``lfpio``, ``pio``, ``pso``, ``heuristic``, ``random`` or a stable-baselines3 model path) over
+  seeds: per-step CSV and ``summary.json`` (:mod:`uav_formation_env.evaluation`).
+- ``uav-formation run --out results/run``: one episode of the heuristic controller.
+"""
 
 from __future__ import annotations
 
@@ -74,6 +83,119 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenario_for(args: argparse.Namespace):
+    scenario = resolve_scenario(args.scenario)
+    overrides = {}
+    if getattr(args, "observer", None) is not None:
+        overrides["observer.enabled"] = args.observer == "on"
+    duration = _duration(args)
+    if duration is not None:
+        overrides["duration"] = duration
+    return with_overrides(scenario, overrides) if overrides else scenario
+
+
+def _duration(args: argparse.Namespace) -> float | None:
+    if args.duration is not None:
+        return float(args.duration)
+    if args.quick:
+        from uav_formation_env.reproduce import QUICK_DURATION_S
+
+        return QUICK_DURATION_S
+    return None
+
+
+def _seeds(args: argparse.Namespace) -> list[int]:
+    if args.seeds < 1:
+        raise SystemExit("--seeds must be >= 1")
+    return list(range(args.seed_start, args.seed_start + args.seeds))
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from uav_formation_env.evaluation import (
+        json_ready,
+        make_policy,
+        run_episodes,
+        summarise,
+        write_json,
+        write_records,
+    )
+    from uav_formation_env.plotting import plot_trajectories
+
+    scenario = _scenario_for(args)
+    seeds = _seeds(args)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    policy = make_policy(args.policy, scenario, seed=seeds[0], algo=args.algo)
+    batch = run_episodes(
+        scenario,
+        policy,
+        seeds,
+        policy_name=args.policy,
+        progress=not args.quiet,
+        desc=f"evaluate {Path(args.policy).name} x {len(seeds)} seeds",
+    )
+    summary = json_ready(summarise(batch))
+    write_records(batch, out / "records.csv")
+    write_json(summary, out / "summary.json")
+    plot_trajectories(
+        batch.z[:, 0, :, :3],
+        scenario,
+        out / "trajectories.png",
+        title=f"{args.policy}, observer {'on' if scenario.observer.enabled else 'off'}, "
+        f"seed {seeds[0]}",
+    )
+    keys = (
+        "triggers_per_uav",
+        "triggers_mean",
+        "realised_cost_mean",
+        "formation_rmse_m",
+        "min_obstacle_surface_distance_m",
+        "min_separation_m",
+        "collisions",
+        "observer_rms_error",
+        "wall_time_per_step_s",
+    )
+    print(json.dumps({k: summary[k] for k in keys}, indent=2))
+    print(f"wrote {out / 'records.csv'}, {out / 'summary.json'}, {out / 'trajectories.png'}")
+    return 0
+
+
+def _reproduce(args: argparse.Namespace) -> int:
+    from uav_formation_env.reproduce import LABELS, reproduce
+
+    result = reproduce(
+        args.out,
+        seeds=_seeds(args),
+        scenario=args.scenario,
+        duration=_duration(args),
+        jobs=args.jobs,
+        progress=not args.quiet,
+        records=args.records,
+    )
+    summary = result.summary
+    print(f"wall time {summary['wall_time_s']:.1f} s ({len(summary['seeds'])} seeds)")
+    for variant, s in summary["variants"].items():
+        per_uav = " ".join(f"{x:6.1f}" for x in s["triggers_per_uav"])
+        print(
+            f"{LABELS[variant]:>15}: triggers {per_uav} | mean {s['triggers_mean']:6.1f} "
+            f"(paper {s['paper_triggers_mean']:g}) | min centre dist "
+            f"{s['min_obstacle_center_distance_m']:.1f} m | collisions {s['collisions']}"
+        )
+    print(f"wrote {result.out}/table2.csv, summary.json, REPORT.md and figures")
+    return 0
+
+
+def _add_common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--scenario", default="paper", help="registered name or YAML path")
+    parser.add_argument("--seeds", type=int, default=5, help="number of episodes (seeds)")
+    parser.add_argument("--seed-start", type=int, default=0, help="first seed (then +1, ...)")
+    parser.add_argument("--duration", type=float, default=None, help="episode length [s]")
+    parser.add_argument(
+        "--quick", action="store_true", help="20 s episodes (smoke test; --duration wins)"
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="uav-formation", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -84,6 +206,44 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", default="results/run")
     run.add_argument("--quiet", action="store_true")
     run.set_defaults(func=_run)
+
+    evaluate = sub.add_parser(
+        "evaluate",
+        help="evaluate a policy over seeds (per-step CSV, summary.json)",
+        description="Run one policy on B seeds as one batch and write records.csv, "
+        "summary.json and trajectories.png (first seed).",
+    )
+    evaluate.add_argument(
+        "--policy",
+        default="lfpio",
+        help="lfpio, pio, pso (reference DMPC), heuristic, random, or a stable-baselines3 "
+        "model path (.zip; a vecnormalize.pkl beside it is applied)",
+    )
+    evaluate.add_argument("--algo", default=None, help="SB3 algorithm of a model (default: try)")
+    evaluate.add_argument("--observer", choices=["on", "off"], default=None)
+    evaluate.add_argument("--out", default="results/eval")
+    _add_common(evaluate)
+    evaluate.set_defaults(func=_evaluate)
+
+    reproduce = sub.add_parser(
+        "reproduce",
+        help="the paper's four variants: Table 2, Figs. 5-9, REPORT.md",
+        description="Fly {PIO, LFPIO} x {NFTSMO off, on} on the same seeds (each variant's "
+        "seeds as one batch) and write table2.csv, summary.json, the figures and REPORT.md.",
+    )
+    reproduce.add_argument("--out", default="results/paper")
+    reproduce.add_argument(
+        "--jobs",
+        type=int,
+        default=0,
+        help="variants run in parallel processes (default 0: one per CPU, at most 4); "
+        "the numbers do not depend on it",
+    )
+    reproduce.add_argument(
+        "--records", action="store_true", help="also write records_<variant>.csv per step"
+    )
+    _add_common(reproduce)
+    reproduce.set_defaults(func=_reproduce)
     return parser
 
 

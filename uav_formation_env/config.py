@@ -267,16 +267,24 @@ class AvoidanceConfig:
 
 @dataclass(frozen=True)
 class CostConfig:
-    """Weights and horizon of the game cost J_i (eq. 6, SPEC §4)."""
+    """Weights and horizon of the game cost J_i (eq. 6, SPEC §4).
+
+    ``separation`` and ``separation_distance`` add a term the paper does not have (see
+    docs/deviations.md): ``s Σ_{j≠i} max(0, d_s - ||p_i - p_j||)²`` over every other UAV (sensed,
+    not only neighbours), at k = 0..H. It is zero whenever all UAVs are at least d_s apart, e.g. in
+    the paper's formation (spacing >= 22.4 m). ``separation = 0`` gives the paper's J_i.
+    """
 
     q: float = 1.0  # formation error weight, k = 0..H-1 [1/m^2]
     r: float = 5.0  # control energy weight [s^4/m^2]
     m: float = 1.0  # terminal formation error weight [1/m^2]
     n: float = 10.0  # preset-velocity weight, k = 0..H [s^2/m^2]
     horizon: int = 5  # prediction horizon N (inputs u(0..N-1), terminal state at N) [steps]
+    separation: float = 30.0  # s, weight of the separation penalty [1/m^2]
+    separation_distance: float = 10.0  # d_s, pairs closer are penalised [m]
 
     def __post_init__(self) -> None:
-        for name in ("q", "r", "m", "n"):
+        for name in ("q", "r", "m", "n", "separation", "separation_distance"):
             _non_negative(getattr(self, name), f"cost.{name}")
         _require(
             isinstance(self.horizon, int) and self.horizon >= 1,

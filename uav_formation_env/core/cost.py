@@ -4,10 +4,13 @@ For UAV i over a horizon of H steps, with ``ε_ij(k) = (z_i(k) - z^d_i) - (ẑ_j
 
     J_i = q Σ_j h_ij Σ_{k<H} ||ε_ij(k)||² + r Σ_{k<H} ||u_i(k)||²
         + m Σ_j h_ij ||ε_ij(H)||² + n Σ_{k<=H} ||v_i(k) - v^d_i(k)||²
+        + s Σ_{j≠i} Σ_{k<=H} max(0, d_s - ||p_i(k) - p̂_j(k)||)²
 
-``||x||_w`` is read as ``w xᵀx`` (SPEC §4.1). The stage cost, the reward of one realised transition,
-is the ``k``-th summand: ``q Σ_j h_ij ||ε_ij||² + r ||u_i||² + n ||v_i - v^d_i||²``. Both are built
-from the same two term functions below.
+``||x||_w`` is read as ``w xᵀx`` (SPEC §4.1). The last line, the separation term, is not in the
+paper (docs/deviations.md §5): it runs over every other UAV j (sensed, not only neighbours) and
+vanishes while all UAVs are at least d_s apart. The stage cost, the reward of one realised
+transition, is the ``k``-th summand: ``q Σ_j h_ij ||ε_ij||² + r ||u_i||² + n ||v_i - v^d_i||²
++ s Σ_{j≠i} max(0, d_s - ||p_i - p_j||)²``. Both are built from the same term functions below.
 
 Shapes: B scenario copies, N UAVs, P candidates per UAV, H horizon steps.
 
@@ -38,10 +41,11 @@ class CostTerms:
     energy: np.ndarray  # r Σ_k ||u_i(k)||²
     terminal: np.ndarray  # m Σ_j h_ij ||ε_ij(H)||²
     velocity: np.ndarray  # n Σ_k ||v_i(k) - v^d_i(k)||²
+    separation: np.ndarray  # s Σ_{j≠i} Σ_k max(0, d_s - ||p_i(k) - p_j(k)||)²
 
     @property
     def total(self) -> np.ndarray:
-        return self.formation + self.energy + self.terminal + self.velocity
+        return self.formation + self.energy + self.terminal + self.velocity + self.separation
 
     def as_dict(self) -> dict[str, np.ndarray]:
         return {
@@ -49,6 +53,7 @@ class CostTerms:
             "energy": self.energy,
             "terminal": self.terminal,
             "velocity": self.velocity,
+            "separation": self.separation,
         }
 
 
@@ -192,6 +197,42 @@ def velocity_error_sq(velocity: np.ndarray, reference: np.ndarray) -> np.ndarray
     return np.einsum("...k,...k->...", diff, diff)
 
 
+def separation_active(weights: CostConfig) -> bool:
+    """Whether the separation term can be non-zero (``s > 0`` and ``d_s > 0``)."""
+    return weights.separation > 0.0 and weights.separation_distance > 0.0
+
+
+def others_mask(batch: int, n_uav: int) -> np.ndarray:
+    """(B, N, N) 1 for every other UAV j of receiver i, 0 on the diagonal (read-only view)."""
+    return np.broadcast_to(1.0 - np.eye(n_uav), (batch, n_uav, n_uav))
+
+
+def separation_sq(
+    own: np.ndarray, others: np.ndarray, mask: np.ndarray, distance: float
+) -> np.ndarray:
+    """``Σ_j mask_ij max(0, d_s - ||own_i - others_ij||)²``: the unweighted separation penalty.
+
+    Args:
+        own: (B, R, *extra, 3) receivers' positions [m], e.g. extra = (P, H+1).
+        others: (B, R, S, *tail, 3) each receiver's view of every sender's positions [m], where
+            ``tail`` are the trailing dims of ``extra`` (e.g. (H+1,)) or ``()``.
+        mask: (B, R, S) which senders count (0 for the receiver itself).
+        distance: d_s [m].
+
+    Returns:
+        (B, R, *extra) [m²].
+    """
+    batch, n_recv, n_send = mask.shape
+    tail = others.ndim - 4
+    lead = own.ndim - 3 - tail
+    own = own.reshape(*own.shape[: 2 + lead], 1, *own.shape[2 + lead :])
+    others = others.reshape(batch, n_recv, *(1,) * lead, *others.shape[2:])
+    diff = own - others  # (B, R, *lead, S, *tail, 3)
+    gap = np.maximum(distance - np.sqrt(np.einsum("...k,...k->...", diff, diff)), 0.0)
+    weight = mask.reshape(batch, n_recv, *(1,) * lead, n_send, *(1,) * tail)
+    return (gap * gap * weight).sum(axis=2 + lead)
+
+
 def stage_cost(
     z: np.ndarray,
     u_n: np.ndarray,
@@ -209,19 +250,30 @@ def stage_cost(
         reference_velocity: (B, N, 3) v^d [m/s].
         adjacency: (B, N, N) h_ij.
         offsets: (N, 6) z^d.
-        weights: q, r, n (the terminal weight m does not enter a stage).
+        weights: q, r, n, s, d_s (the terminal weight m does not enter a stage).
         mirrored: literal mirrored-offset reading.
 
     Returns:
-        :class:`CostTerms` of shape (B, N) with ``terminal = 0``.
+        :class:`CostTerms` of shape (B, N) with ``terminal = 0``; ``separation`` runs over every
+        other UAV, whatever the adjacency.
     """
     a = anchored(z, offsets, mirrored)
     formation = weights.q * formation_error_sq(a, a, adjacency)
+    if separation_active(weights):
+        batch, n_uav = z.shape[:2]
+        positions = z[..., :3]
+        others = np.broadcast_to(positions[:, None], (batch, n_uav, n_uav, 3))
+        separation = weights.separation * separation_sq(
+            positions, others, others_mask(batch, n_uav), weights.separation_distance
+        )
+    else:
+        separation = np.zeros_like(formation)
     return CostTerms(
         formation=formation,
         energy=weights.r * np.einsum("...k,...k->...", u_n, u_n),
         terminal=np.zeros_like(formation),
         velocity=weights.n * velocity_error_sq(z[..., 3:], reference_velocity),
+        separation=separation,
     )
 
 
@@ -245,7 +297,10 @@ class HorizonCost:
         own_offset: (B, R, 6) what anchoring subtracts from each receiver's states (± z^d_i).
         moments: the neighbours' side of the formation error, leading dims (B, R).
         reference_preview: (B, R, H+1, 3) v^d_i(t + kδ) [m/s].
-        weights: q, r, m, n.
+        weights: q, r, m, n, s, d_s.
+        others_position: (B, R, S, H+1, 3) each receiver's prediction of every sender's position
+            p̂_j(k) (in the receiver's frame) [m]; only the separation term reads it.
+        others_mask: (B, R, S) 1 for the senders the separation term counts (every other UAV).
     """
 
     free: np.ndarray
@@ -254,6 +309,8 @@ class HorizonCost:
     moments: NeighbourMoments
     reference_preview: np.ndarray
     weights: CostConfig
+    others_position: np.ndarray
+    others_mask: np.ndarray
 
     def predict(self, candidates: np.ndarray) -> np.ndarray:
         """Predicted states (B, R, P, H+1, 6) of candidates (B, R, P, H, 3), as ``rollout``."""
@@ -263,16 +320,28 @@ class HorizonCost:
 
     def terms(self, candidates: np.ndarray) -> CostTerms:
         """Named terms of J_i for candidates (B, R, P, H, 3) [m/s^2]; each (B, R, P)."""
+        return self._terms(candidates, with_separation=True)
+
+    def _terms(self, candidates: np.ndarray, with_separation: bool) -> CostTerms:
         predicted = self.predict(candidates)  # (B, R, P, H+1, 6)
         own = predicted - self.own_offset[:, :, None, None, :]  # anchored, as anchored()
         pair_sq = self.moments.error_sq(own)  # (B, R, P, H+1)
         velocity_sq = velocity_error_sq(predicted[..., 3:], self.reference_preview[:, :, None])
         w = self.weights
+        formation = w.q * pair_sq[..., :-1].sum(axis=-1)
+        if with_separation and separation_active(w):
+            gap_sq = separation_sq(
+                predicted[..., :3], self.others_position, self.others_mask, w.separation_distance
+            )  # (B, R, P, H+1)
+            separation = w.separation * gap_sq.sum(axis=-1)
+        else:
+            separation = np.zeros_like(formation)
         return CostTerms(
-            formation=w.q * pair_sq[..., :-1].sum(axis=-1),
+            formation=formation,
             energy=w.r * np.einsum("...hk,...hk->...", candidates, candidates),
             terminal=w.m * pair_sq[..., -1],
             velocity=w.n * velocity_sq.sum(axis=-1),
+            separation=separation,
         )
 
     def terms_total(self, candidates: np.ndarray) -> np.ndarray:
@@ -288,27 +357,72 @@ class HorizonCost:
             moments=self.moments.take(index),
             reference_preview=_take_flat(self.reference_preview, index),
             weights=self.weights,
+            others_position=_take_flat(self.others_position, index),
+            others_mask=_take_flat(self.others_mask, index),
         )
 
-    def quadratic(self) -> QuadraticCost:
-        """The coefficients of J_i as a quadratic polynomial of the flattened candidate.
+    def separation_part(self, half_width: np.ndarray | None = None) -> SeparationCost | None:
+        """The separation term on its own, for population evaluation; None if it is off.
 
-        J_i is exactly quadratic in U (affine prediction, squared norms), so
-        ``J(x) = c + g·x + xᵀ Q x`` with ``x`` = U flattened to n = 3H components. The coefficients
-        are identified from ``1 + 2n + n(n-1)/2`` evaluations of :meth:`terms` (one call) by
-        polarisation, with no second copy of the formula: ``c = J(0)``,
+        With ``half_width`` (B, R, 3), the per-axis bound ``|u_c(k)| <= half_width_c`` of the
+        candidates (the optimiser's box), only the (receiver, sender) pairs that can come closer
+        than d_s for SOME candidate in the box are kept: a pair is dropped when, at every k, the
+        free-response distance minus the largest displacement the box allows,
+        ``||Σ_m |response_m(k)| half_width||`` per axis, is at least d_s (+1 µm). For candidates
+        inside the box the result is then exactly the full term (the dropped pairs contribute
+        ``max(0, ·) = 0``); outside the box it is not. Without ``half_width`` every pair is kept.
+        """
+        w = self.weights
+        if not separation_active(w):
+            return None
+        batch, n_recv, h1 = self.free.shape[:3]
+        horizon = h1 - 1
+        response = self.response.reshape(3 * horizon, h1, 6)[:, :, :3].reshape(3 * horizon, -1)
+        free = self.free[..., :3]  # (B, R, H+1, 3)
+        keep = np.broadcast_to(self.others_mask > 0, self.others_mask.shape)
+        if half_width is not None:
+            reach = np.tile(np.asarray(half_width, dtype=float), horizon) @ np.abs(response)
+            reach = np.sqrt((reach.reshape(batch, n_recv, h1, 3) ** 2).sum(axis=-1))
+            diff = free[:, :, None] - self.others_position  # (B, R, S, H+1, 3)
+            closest = np.sqrt(np.einsum("...k,...k->...", diff, diff)) - reach[:, :, None]
+            keep = keep & (closest.min(axis=-1) < w.separation_distance + 1e-6)
+        problem, sender = np.nonzero(keep.reshape(batch * n_recv, -1))
+        rows, pair_row = np.unique(problem, return_inverse=True)
+        return SeparationCost(
+            shape=(batch, n_recv),
+            rows=rows,
+            pair_row=pair_row.reshape(-1),
+            free=free.reshape(batch * n_recv, -1)[rows],
+            response=response,
+            others=self.others_position.reshape(batch * n_recv, *self.others_position.shape[2:])[
+                problem, sender
+            ],
+            weight=w.separation,
+            distance=w.separation_distance,
+        )
+
+    def quadratic(self, half_width: np.ndarray | None = None) -> QuadraticCost:
+        """J_i as its quadratic part plus the separation term, for fast population evaluation.
+
+        Without the separation term J_i is exactly quadratic in U (affine prediction, squared
+        norms), so ``J(x) = c + g·x + xᵀ Q x`` with ``x`` = U flattened to n = 3H components. The
+        coefficients of that part are identified from ``1 + 2n + n(n-1)/2`` evaluations of its
+        terms (one call) by polarisation, with no second copy of the formula: ``c = J(0)``,
         ``g_i = (J(e_i) - J(-e_i)) / 2``, ``Q_ii = (J(e_i) + J(-e_i)) / 2 - c``,
         ``Q_ij = (J(e_i + e_j) - J(e_i) - J(e_j) + c) / 2``. Their rounding error is about
-        1e-16 · |J| per unit input squared.
+        1e-16 · |J| per unit input squared. The separation term (not quadratic) is evaluated
+        directly, for the pairs :meth:`separation_part` keeps with ``half_width`` (exact for
+        candidates in that box; every pair without it).
         """
         batch, n_recv = self.free.shape[:2]
         horizon = self.free.shape[2] - 1
         n = 3 * horizon
         points, upper = _polarisation_points(n)
-        values = self.terms(
+        values = self._terms(
             np.broadcast_to(
                 points.reshape(-1, horizon, 3), (batch, n_recv) + (len(points), horizon, 3)
-            )
+            ),
+            with_separation=False,
         ).total
         c = values[..., 0]
         plus, minus, pairs = (
@@ -323,30 +437,116 @@ class HorizonCost:
         off = 0.5 * (pairs - plus[..., i] - plus[..., j] + c[..., None])
         hessian[..., i, j] = off
         hessian[..., j, i] = off
-        return QuadraticCost(constant=c, linear=0.5 * (plus - minus), hessian=hessian)
+        return QuadraticCost(
+            constant=c,
+            linear=0.5 * (plus - minus),
+            hessian=hessian,
+            separation=self.separation_part(half_width),
+        )
+
+
+@dataclass(frozen=True)
+class SeparationCost:
+    """The separation term of J_i for the pairs that can be active, for population evaluation.
+
+    Built by :meth:`HorizonCost.separation_part`. Problems are the flattened (B·R) receivers;
+    a pair is (problem, sender).
+
+    Attributes:
+        shape: (B, R) of the problem grid.
+        rows: (K,) problems with at least one kept pair.
+        pair_row: (A,) position in ``rows`` of each kept pair's problem.
+        free: (K, (H+1)·3) free-response positions of those problems [m].
+        response: (3H, (H+1)·3) position rows of the unit input responses [m per m/s^2].
+        others: (A, H+1, 3) predicted positions of each pair's sender [m].
+        weight: s [1/m²].
+        distance: d_s [m].
+    """
+
+    shape: tuple[int, int]
+    rows: np.ndarray
+    pair_row: np.ndarray
+    free: np.ndarray
+    response: np.ndarray
+    others: np.ndarray
+    weight: float
+    distance: float
+
+    def total(self, candidates: np.ndarray) -> np.ndarray:
+        """``s Σ_pairs Σ_k max(0, d_s - ||p_i(k) - p̂_j(k)||)²`` of candidates (B, R, P, H, 3)."""
+        batch, n_recv, size = candidates.shape[:3]
+        out = np.zeros((batch * n_recv, size))
+        if self.rows.size:
+            h1 = self.others.shape[1]
+            x = candidates.reshape(batch * n_recv, size, -1)[self.rows]  # (K, P, 3H)
+            position = (x @ self.response + self.free[:, None]).reshape(-1, size, h1, 3)
+            diff = position[self.pair_row] - self.others[:, None]  # (A, P, H+1, 3)
+            gap = np.maximum(self.distance - np.sqrt(np.einsum("...k,...k->...", diff, diff)), 0)
+            per_pair = np.einsum("aph,aph->ap", gap, gap)
+            summed = np.zeros((self.rows.size, size))
+            np.add.at(summed, self.pair_row, per_pair)
+            out[self.rows] = self.weight * summed
+        return out.reshape(batch, n_recv, size)
+
+    def take(self, index: np.ndarray) -> SeparationCost:
+        """Problems ``index`` (M,) of the flattened (B·R) axis as one copy (grid (1, M))."""
+        index = np.asarray(index)
+        position = {int(row): k for k, row in enumerate(self.rows)}
+        new_rows, free, pair_row, others = [], [], [], []
+        for t, flat in enumerate(index.tolist()):
+            k = position.get(int(flat))
+            if k is None:
+                continue
+            pairs = np.flatnonzero(self.pair_row == k)
+            pair_row.extend([len(new_rows)] * pairs.size)
+            new_rows.append(t)
+            free.append(self.free[k])
+            others.append(self.others[pairs])
+        h1 = self.others.shape[1]
+        return SeparationCost(
+            shape=(1, index.size),
+            rows=np.asarray(new_rows, dtype=np.int64),
+            pair_row=np.asarray(pair_row, dtype=np.int64),
+            free=np.asarray(free).reshape(len(new_rows), self.free.shape[1]),
+            response=self.response,
+            others=np.concatenate(others) if others else np.zeros((0, h1, 3)),
+            weight=self.weight,
+            distance=self.distance,
+        )
 
 
 @dataclass(frozen=True)
 class QuadraticCost:
-    """``J(x) = c + g·x + xᵀ Q x`` over flattened candidates x (n = 3H).
+    """``J(x) = c + g·x + xᵀ Q x + separation(x)`` over flattened candidates x (n = 3H).
 
-    Built by :meth:`HorizonCost.quadratic`; evaluates a population with one batched matmul.
+    Built by :meth:`HorizonCost.quadratic`; evaluates a population with one batched matmul (plus
+    the separation term of the pairs that can be active, if any).
 
     Attributes:
-        constant: (B, R) c = J(0).
+        constant: (B, R) c = J(0) without the separation term.
         linear: (B, R, n) g.
         hessian: (B, R, n, n) Q (symmetric; half the Hessian).
+        separation: the separation term, or None if it is off.
     """
 
     constant: np.ndarray
     linear: np.ndarray
     hessian: np.ndarray
+    separation: SeparationCost | None = None
 
     def total(self, candidates: np.ndarray) -> np.ndarray:
         """J_i of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P)."""
-        x = candidates.reshape(*candidates.shape[:3], -1)
-        y = x @ self.hessian + self.linear[:, :, None]
-        return self.constant[:, :, None] + np.einsum("...k,...k->...", y, x)
+        batch, n_recv, size = candidates.shape[:3]
+        n = self.linear.shape[-1]
+        x = candidates.reshape(batch * n_recv, size, n)
+        y = x @ self.hessian.reshape(batch * n_recv, n, n)
+        y += self.linear.reshape(batch * n_recv, 1, n)
+        total = np.einsum("rpk,rpk->rp", y, x)
+        total += self.constant.reshape(batch * n_recv, 1)
+        total = total.reshape(batch, n_recv, size)
+        if self.separation is not None and self.separation.rows.size:
+            total += self.separation.total(candidates)
+        return total
 
     def take(self, index: np.ndarray) -> QuadraticCost:
         """Receivers ``index`` (M,) of the flattened (B·R) axis as one copy, shapes (1, M, ...)."""
@@ -354,6 +554,7 @@ class QuadraticCost:
             _take_flat(self.constant, index),
             _take_flat(self.linear, index),
             _take_flat(self.hessian, index),
+            None if self.separation is None else self.separation.take(index),
         )
 
 
@@ -381,6 +582,37 @@ def input_response(horizon: int, dt: float) -> np.ndarray:
     return response
 
 
+@lru_cache(maxsize=8)
+def state_response(horizon: int, dt: float) -> np.ndarray:
+    """Rollout under zero inputs of every unit initial-state component: (6, (H+1)·6) [-, s].
+
+    Row ``c`` is the predicted trajectory (flattened (H+1, 6)) from ``z0 = e_c``. The result is
+    cached and read-only.
+    """
+    response = rollout(np.eye(6), np.zeros((6, horizon, 3)), dt).reshape(6, (horizon + 1) * 6)
+    response.flags.writeable = False
+    return response
+
+
+def superposed_rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndarray:
+    """:func:`~uav_formation_env.core.dynamics.rollout` by superposition of its cached unit
+    responses (:func:`state_response`, :func:`input_response`): two matmuls instead of the
+    cumulative sums; the same trajectories up to floating-point rounding.
+
+    Args:
+        z0: (..., 6) initial states [m, m/s].
+        inputs: (..., H, 3) input sequences [m/s^2] (same leading dims).
+        dt: step length [s].
+
+    Returns:
+        (..., H + 1, 6).
+    """
+    *lead, horizon, _ = inputs.shape
+    forced = inputs.reshape(*lead, 3 * horizon) @ input_response(horizon, dt)
+    forced += z0 @ state_response(horizon, dt)
+    return forced.reshape(*lead, horizon + 1, 6)
+
+
 def prepare_horizon_cost(
     z0: np.ndarray,
     neighbour_trajectories: np.ndarray,
@@ -397,11 +629,12 @@ def prepare_horizon_cost(
         z0: (B, N, 6) measured states at time t [m, m/s].
         neighbour_trajectories: (B, N, H+1, 6) each UAV's broadcast prediction ẑ_j(k), k = 0..H,
             seen alike by every receiver; or (B, N, N, H+1, 6) each receiver i's own view of
-            every sender j (``[:, i, j]``), e.g. in i's own frame.
+            every sender j (``[:, i, j]``), e.g. in i's own frame. The formation terms read the
+            rows with h_ij = 1; the separation term reads the positions of every j ≠ i.
         reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
         adjacency: (B, N, N) h_ij, row = receiver.
         offsets: (N, 6) z^d.
-        weights: q, r, m, n.
+        weights: q, r, m, n, s, d_s.
         dt: control step δ [s].
         mirrored: literal mirrored-offset reading.
     """
@@ -412,13 +645,20 @@ def prepare_horizon_cost(
     )
     others = neighbour_trajectories - relative_offset_sign(mirrored) * send_offsets
     horizon = reference_preview.shape[-2] - 1
+    batch, n_recv = z0.shape[:2]
+    positions = neighbour_trajectories[..., :3]
+    if not per_receiver:
+        positions = np.broadcast_to(positions[:, None], (batch, n_recv, *positions.shape[1:]))
+    free = (z0 @ state_response(horizon, dt)).reshape(*z0.shape[:-1], horizon + 1, 6)
     return HorizonCost(
-        free=rollout(z0, np.zeros((*z0.shape[:-1], horizon, 3)), dt),
+        free=free,
         response=input_response(horizon, dt),
         own_offset=z0 - anchored(z0, offsets, mirrored),
         moments=neighbour_moments(others, adjacency, per_receiver),
         reference_preview=reference_preview,
         weights=weights,
+        others_position=positions,
+        others_mask=others_mask(batch, n_recv),
     )
 
 
@@ -443,7 +683,7 @@ def horizon_cost(
         reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
         adjacency: (B, N, N) h_ij, row = receiver.
         offsets: (N, 6) z^d.
-        weights: q, r, m, n.
+        weights: q, r, m, n, s, d_s.
         dt: control step δ [s].
         mirrored: literal mirrored-offset reading.
 

@@ -9,7 +9,9 @@ anchored states only through differences, and on the own velocity, so this frame
 J_i as global coordinates (up to the float32 rounding of the observation).
 
 Plans: UAV i uses the broadcast plan of j only if h_ij = 1 in its own observation; a
-non-neighbour's view is predicted with zero inputs and has weight 0 in J_i.
+non-neighbour's view is predicted with zero inputs and enters J_i only through the separation term
+(every other UAV is sensed; docs/deviations.md §5). The relative position of j seen by i is the
+observed relative formation error plus the mission offsets, ``p^d_j - p^d_i``.
 
 Shapes: B copies, N UAVs (receivers i and senders j), H horizon steps.
 """
@@ -27,8 +29,8 @@ from uav_formation_env.core.cost import (
     anchored,
     prepare_horizon_cost,
     relative_offset_sign,
+    superposed_rollout,
 )
-from uav_formation_env.core.dynamics import rollout
 from uav_formation_env.core.observation import DecodedObservation, others_index
 
 __all__ = [
@@ -140,8 +142,10 @@ def horizon_problems(
 ) -> HorizonProblems:
     """Every UAV's J_i against the plans it receives, from its observation and mission data.
 
-    Neighbour predictions are disturbance-free ZOH rollouts of the senders' observed states under
-    their plans. The reference preview is the preset schedule at t + kδ, or the UAV's current
+    Neighbour predictions are disturbance-free ZOH rollouts
+    (:func:`~uav_formation_env.core.cost.superposed_rollout`) of the senders' observed states under
+    their plans; every other UAV is rolled out with zero inputs (its positions enter only the
+    separation term). The reference preview is the preset schedule at t + kδ, or the UAV's current
     reference held over the horizon while its observation says "avoiding" (SPEC §4.3).
 
     Args:
@@ -155,7 +159,7 @@ def horizon_problems(
     dt, horizon = scenario.dynamics.dt, scenario.cost.horizon
     batch, n = decoded.velocity.shape[:2]
     frame = own_frame_views(decoded, offsets, mirrored)
-    trajectories = rollout(frame.views, received_plans(plans, frame.adjacency), dt)
+    trajectories = superposed_rollout(frame.views, received_plans(plans, frame.adjacency), dt)
     # Each UAV's own time, reference and avoiding flag: a batch of B·N single-UAV previews.
     preview = topology.reference_preview(
         scenario.schedule,

@@ -11,13 +11,16 @@ their messages. UAV i acts on
 - mission data every UAV carries: formation offsets z^d, cost weights and horizon, δ, duration,
   u_max and the preset-velocity schedule (from the scenario);
 - the last broadcast plans of its neighbours (``h_ij = 1`` in its own observation). Plans of other
-  UAVs are never used: a non-neighbour's view is predicted with zero inputs and has weight 0 in J_i.
+  UAVs are never used: a non-neighbour's view is predicted with zero inputs and enters J_i only
+  through the separation term (its relative position is the observed relative formation error
+  plus ``p^d_j - p^d_i``; docs/deviations.md §5).
 
 It never sees absolute positions, the simulator or the environment. UAV i works in its own frame:
 own position 0, own velocity as observed, neighbour j's anchored state = own + the relative
-formation error it observes. J_i only depends on differences of anchored states and on
-``v_i - v^d_i``, so this frame gives the same J_i as global coordinates. The construction of these
-views and of every UAV's horizon problem lives in :mod:`uav_formation_env.policies.broadcast`.
+formation error it observes. J_i only depends on differences of anchored states (and of
+positions) and on ``v_i - v^d_i``, so this frame gives the same J_i as global coordinates. The
+construction of these views and of every UAV's horizon problem lives in
+:mod:`uav_formation_env.policies.broadcast`.
 
 Algorithm per control step, for every UAV i simultaneously (a Jacobi best-response step)
 -----------------------------------------------------------------------------------------
@@ -34,11 +37,13 @@ Algorithm per control step, for every UAV i simultaneously (a Jacobi best-respon
    ``u_d = -estimate``); the output is the better of W_i and the best sequence found, so it is
    never worse than W_i. Otherwise the output is W_i (not triggered, no evaluations). All
    triggered problems of all copies are gathered into one flat batch and solved by one
-   :func:`~uav_formation_env.policies.optimizers.minimise` call per step. J_i is exactly quadratic
-   in U_i, so by default the populations are evaluated through its quadratic coefficients,
-   identified per step from evaluations of the one definition
-   (:meth:`~uav_formation_env.core.cost.HorizonCost.quadratic`); ``population_cost="direct"``
-   evaluates every population with the full formula instead (same result to ~1e-13).
+   :func:`~uav_formation_env.policies.optimizers.minimise` call per step. Apart from the
+   separation term J_i is exactly quadratic in U_i, so by default the populations are evaluated
+   through its quadratic coefficients, identified per step from evaluations of the one definition
+   (:meth:`~uav_formation_env.core.cost.HorizonCost.quadratic`), plus the separation term
+   evaluated directly for the pairs that can come closer than d_s inside the search box (none in
+   formation flight); ``population_cost="direct"`` evaluates every population with the full
+   formula instead (same result to ~1e-13).
 5. Apply element 0 (the action is ``u_n(0|t) / u_max``; the plant adds ``u_d``) and broadcast the
    whole output sequence.
 
@@ -137,7 +142,8 @@ class NashDMPCPolicy:
         threshold: event-trigger threshold on J_i(W) [-].
         inner_rounds: K exchange / re-optimise rounds per step (SPEC §5; 1 = the paper).
         population_cost: how the optimiser's populations are evaluated: ``"quadratic"`` (J_i's
-            exact quadratic coefficients, identified once per step from the one definition, see
+            exact quadratic coefficients, identified once per step from the one definition, plus
+            the separation term of the pairs that can be active in the search box, see
             :meth:`~uav_formation_env.core.cost.HorizonCost.quadratic`; fast) or ``"direct"``
             (:meth:`~uav_formation_env.core.cost.HorizonCost.terms` on every population). Both
             agree to rounding (~1e-13 relative); J_pre, J_exec and the never-worse-than-W check
@@ -350,12 +356,12 @@ class NashDMPCPolicy:
             if index.size == 0:
                 continue
             sub = problems.cost.take(index)  # the M triggered problems as one copy
+            half = problems.half_width.reshape(-1, 3)[index][:, None, :]  # (M, 1, 3)
             if self.population_cost == "quadratic":
-                population_cost = sub.quadratic().total
+                population_cost = sub.quadratic(half_width=half[None, :, 0]).total
             else:
                 population_cost = sub.terms_total
             x0 = current.reshape(-1, h, 3)[index]
-            half = problems.half_width.reshape(-1, 3)[index][:, None, :]  # (M, 1, 3)
             result = minimise(
                 lambda x, f=population_cost: f(x[None])[0],
                 x0,

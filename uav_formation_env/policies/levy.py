@@ -11,18 +11,28 @@ All randomness comes from the ``numpy.random.Generator`` passed in.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["DEFAULT_BETA", "levy_steps", "mantegna_components", "mantegna_sigma"]
+__all__ = [
+    "DEFAULT_BETA",
+    "TINY",
+    "levy_denominator_into",
+    "levy_steps",
+    "levy_steps_into",
+    "mantegna_components",
+    "mantegna_sigma",
+]
 
 DEFAULT_BETA = 1.5
 
 # Smallest positive normal double: keeps the denominator non-zero so that an (astronomically
 # unlikely) nu == 0 gives a huge but finite step, never inf or 0/0 = nan.
-_TINY = np.finfo(np.float64).tiny
+TINY = np.finfo(np.float64).tiny
 
 
+@lru_cache(maxsize=16)
 def mantegna_sigma(beta: float) -> float:
     """Scale σ_μ of the numerator of Mantegna's Lévy step.
 
@@ -33,7 +43,7 @@ def mantegna_sigma(beta: float) -> float:
             limit with no Lévy part), so it is rejected.
 
     Returns:
-        σ_μ (0.696575... for beta = 1.5).
+        σ_μ (0.696575... for beta = 1.5). Cached per beta (LFPIO asks for it every iteration).
 
     Raises:
         ValueError: If beta is not a finite number in (0, 2).
@@ -80,5 +90,48 @@ def levy_steps(
     Returns:
         Array of ``shape`` of symmetric, heavy-tailed steps (tail index ``beta``).
     """
-    mu, nu = mantegna_components(rng, shape, beta)
-    return mu / np.maximum(np.abs(nu) ** (1.0 / beta), _TINY)
+    shape = (shape,) if isinstance(shape, int | np.integer) else tuple(shape)
+    return levy_steps_into(rng, np.empty((2, *shape)), beta)
+
+
+def levy_steps_into(rng: np.random.Generator, work: np.ndarray, beta: float) -> np.ndarray:
+    """:func:`levy_steps` of shape ``work.shape[1:]``, computed in the buffer ``work``.
+
+    Draws ``mu`` and ``nu`` with one ``standard_normal`` call: the same numbers, in the same order,
+    as :func:`mantegna_components` (two calls).
+
+    Args:
+        rng: Random generator (the only source of randomness).
+        work: ``(2, *shape)`` C-contiguous float64 buffer, overwritten.
+        beta: Stability exponent in (0, 2).
+
+    Returns:
+        ``work[0]``, the steps (a view into ``work``).
+    """
+    sigma = mantegna_sigma(beta)
+    rng.standard_normal(out=work)
+    mu, nu = work[0], work[1]
+    np.multiply(mu, sigma, out=mu)
+    levy_denominator_into(nu, beta)
+    np.maximum(nu, TINY, out=nu)
+    return np.divide(mu, nu, out=mu)
+
+
+def levy_denominator_into(nu: np.ndarray, beta: float) -> np.ndarray:
+    """``|nu|**(1/beta)`` in place (without the guard against 0).
+
+    For ``beta = 1.5`` this is ``cbrt(nu * nu)``, about 4x faster than the power and equal to it
+    up to an ulp or two (floating-point rounding; ``1/1.5`` is not exactly 2/3 in binary).
+
+    Args:
+        nu: float64 array, overwritten.
+        beta: Stability exponent in (0, 2).
+
+    Returns:
+        ``nu``.
+    """
+    if beta == 1.5:
+        np.multiply(nu, nu, out=nu)
+        return np.cbrt(nu, out=nu)
+    np.abs(nu, out=nu)
+    return np.power(nu, 1.0 / beta, out=nu)
