@@ -13,11 +13,13 @@ observer on, the plant applies ``u = clip(u_n + u_d, ±u_max)`` with ``u_d = -(d
 (47 for N = 5); the slot table is in :mod:`uav_formation_env.core.observation`.
 
 **Reward** of agent i: minus the stage cost of its own game cost J_i at the realised transition,
-``-(q Σ_j h_ij ||ε_ij||² + r ||u_n,i||² + n ||v_i - v^d_i||²
-+ s Σ_j max(0, d_s - ||p_i - p_j||)²)`` (the same function the reference MPC minimises; the separation term is our addition to the
-paper's J_i, see docs/deviations.md). With ``collision.mode == "penalty"``, ``collision.penalty`` is subtracted in a step
-where the agent collides. Summed over an episode it is the paper's performance index along the
-realised trajectory.
+
+    -(q Σ_j h_ij ||ε_ij||² + r ||u_n,i||² + n ||v_i - v^d_i||² + s Σ_j max(0, d_s - ||p_i - p_j||)²)
+
+the same function the reference MPC minimises (the separation term is our addition to the paper's
+J_i, see docs/deviations.md). With ``collision.mode == "penalty"``, ``collision.penalty`` is
+subtracted in a step where the agent collides. Summed over an episode it is the paper's
+performance index along the realised trajectory.
 
 **Termination and truncation**: episodes truncate at the scenario's duration (1000 steps for the
 paper). ``collision.mode``: ``"none"`` reports collisions only (default), ``"penalty"`` adds the
@@ -26,10 +28,10 @@ penalty, ``"terminate"`` ends the episode for every agent when any UAV collides 
 negative, ``"terminate"`` makes an early crash attractive to a learner; prefer ``"penalty"``.
 
 **Info** of agent i: ``J`` (stage cost), ``cost_terms`` (formation, energy, terminal, velocity,
-separation), ``disturbance`` and ``disturbance_estimate`` [m/s²], ``reference_velocity``
-[m/s], ``group`` (sub-formation id), ``neighbours`` (agents it receives from this step), ``obstacle_distance`` (to
-the nearest obstacle surface [m]), ``min_separation`` (to the nearest other UAV [m]), ``collision``,
-``position`` [m], ``velocity`` [m/s], ``penalty``, ``t`` [s].
+separation), ``disturbance`` and ``disturbance_estimate`` [m/s²], ``reference_velocity`` [m/s],
+``group`` (sub-formation id), ``neighbours`` (agents it receives from this step),
+``obstacle_distance`` (to the nearest obstacle surface [m]), ``min_separation`` (to the nearest
+other UAV [m]), ``collision``, ``position`` [m], ``velocity`` [m/s], ``penalty``, ``t`` [s].
 
 **State** (``state()``): positions / 100 m, velocities / 20 m/s, reference velocities / 20 m/s,
 estimates / 0.5 m/s², t / duration, and the adjacency matrix, flattened (float32).
