@@ -23,8 +23,8 @@ import numpy as np
 import yaml
 
 from uav_formation_env.config_io import paper_scenario, with_overrides
-from uav_formation_env.core.observation import build_observations
 from uav_formation_env.core.obstacles import obstacle_distances
+from uav_formation_env.envs.parallel import observations_of
 from uav_formation_env.policies import optimizers
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
 from uav_formation_env.sim import FormationSim, StepResult
@@ -32,20 +32,7 @@ from uav_formation_env.sim import FormationSim, StepResult
 
 def observe(sim: FormationSim, result: StepResult) -> np.ndarray:
     """Every agent's observation (B, N, dim), built as the environment builds it."""
-    scenario = sim.scenario
-    return build_observations(
-        result.z,
-        result.reference_velocity,
-        result.estimate,
-        result.adjacency,
-        result.avoiding,
-        result.t / scenario.duration,
-        sim.offsets,
-        sim.obstacle_centers,
-        sim.obstacle_radii,
-        result.min_separation,
-        scenario.formation.mirrored_offsets,
-    )
+    return observations_of(sim, result)
 
 
 def episode(
