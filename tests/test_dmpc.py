@@ -201,33 +201,29 @@ def test_j_pre_equals_horizon_cost_on_global_data(mirrored: bool) -> None:
         r = sim.last
         plans = np.where(r.adjacency[..., None, None] > 0, w[:, None], 0.0)  # (B, i, j, H, 3)
         neighbours = rollout(np.broadcast_to(r.z[:, None], plans.shape[:3] + (6,)), plans, dt)
-        expected = horizon_cost(
-            w[:, :, None],
-            r.z,
-            neighbours,
-            sim.reference_preview(),
-            r.adjacency,
-            sim.offsets,
-            cost,
-            dt,
-            mirrored,
-        ).total[..., 0]
+
+        def j_of(sequences, r=r, neighbours=neighbours):
+            preview = sim.reference_preview()
+            terms = horizon_cost(
+                sequences[:, :, None],
+                r.z,
+                neighbours,
+                preview,
+                r.adjacency,
+                sim.offsets,
+                cost,
+                dt,
+                mirrored,
+            )
+            return terms.total[..., 0]
+
+        expected = j_of(w)
         saw_avoiding |= bool(r.avoiding.any())
         actions = policy.act_batch(observe(sim))
         got = policy.records().j_pre[-1]
         np.testing.assert_allclose(got, expected, rtol=2e-5, atol=1e-4)
         output = policy.plans
-        j_exec = horizon_cost(
-            output[:, :, None],
-            r.z,
-            neighbours,
-            sim.reference_preview(),
-            r.adjacency,
-            sim.offsets,
-            cost,
-            dt,
-            mirrored,
-        ).total[..., 0]
+        j_exec = j_of(output)
         np.testing.assert_allclose(policy.records().j_exec[-1], j_exec, rtol=2e-5, atol=1e-4)
         sim.step(actions * sim.u_max)
     assert saw_avoiding, "the check should cover an avoidance phase (O1 at about 10 s)"

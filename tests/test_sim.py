@@ -144,8 +144,9 @@ def test_cli_run_writes_png_csv_and_summary(tmp_path):
     assert cli_main(["run", "--out", str(tmp_path), "--seed", "1", "--quiet"]) == 0
     assert (tmp_path / "trajectories.png").stat().st_size > 10_000
     lines = (tmp_path / "trajectory.csv").read_text().splitlines()
-    assert lines[0].startswith("step,t,uav,x,y,z")
+    assert lines[0].startswith("seed,step,t,uav,x,y,z,vx,vy,vz")
     assert len(lines) == 1 + 1000 * 5
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["min_obstacle_surface_distance_m"] > 0
+    assert summary["collisions"] == 0
     assert [e["event"] for e in summary["events"]] == ["activate", "restore"] * 2

@@ -12,74 +12,59 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
-from tqdm import tqdm
 
 from uav_formation_env.config_io import resolve_scenario, with_overrides
-from uav_formation_env.policies.heuristic import consensus_pd
-from uav_formation_env.sim import FormationSim
 
 
 def _run(args: argparse.Namespace) -> int:
+    """One heuristic episode: the evaluation runner with the consensus controller."""
+    from uav_formation_env.evaluation import (
+        HeuristicPolicy,
+        json_ready,
+        run_episodes,
+        write_json,
+        write_records,
+    )
+    from uav_formation_env.plotting import plot_trajectories
+
     scenario = resolve_scenario(args.scenario)
     if args.observer is not None:
         scenario = with_overrides(scenario, {"observer.enabled": args.observer == "on"})
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    sim = FormationSim(scenario, batch_size=1)
-    result = sim.reset(seed=args.seed)
-    offsets = sim.offsets
-    rows = []
-    positions = [result.z[0, :, :3].copy()]
-    total_cost = np.zeros(scenario.n_uav)
-    min_obstacle = np.inf
-    events = []
-    for _ in tqdm(range(scenario.n_steps), desc="run (heuristic)", disable=args.quiet):
-        u_n = consensus_pd(
-            result.z, result.reference_velocity, result.adjacency, offsets, sim.u_max
-        )
-        result = sim.step(u_n)
-        positions.append(result.z[0, :, :3].copy())
-        total_cost += result.cost.total[0]
-        min_obstacle = min(min_obstacle, float(result.obstacle_distance.min()))
-        for o in np.flatnonzero(result.activated[0]):
-            events.append({"obstacle": int(o), "event": "activate", "t": float(result.t[0])})
-        for o in np.flatnonzero(result.restored[0]):
-            events.append({"obstacle": int(o), "event": "restore", "t": float(result.t[0])})
-        for i in range(scenario.n_uav):
-            rows.append(
-                [int(result.step[0]), float(result.t[0]), i + 1]
-                + result.z[0, i].tolist()
-                + result.u_applied[0, i].tolist()
-                + result.disturbance[0, i].tolist()
-                + result.estimate[0, i].tolist()
-                + [int(result.groups[0, i]), float(result.cost.total[0, i])]
-            )
-    header = ["step", "t", "uav", "x", "y", "z", "vx", "vy", "vz", "ux", "uy", "uz"]
-    header += ["dx", "dy", "dz", "dhat_x", "dhat_y", "dhat_z", "group", "J_stage"]
-    with open(out / "trajectory.csv", "w", newline="") as stream:
-        writer = csv.writer(stream)
-        writer.writerow(header)
-        writer.writerows(rows)
-    from uav_formation_env.plotting import plot_trajectories
-
-    plot_trajectories(
-        np.asarray(positions), scenario, out / "trajectories.png", title="heuristic controller"
+    batch = run_episodes(
+        scenario,
+        HeuristicPolicy(scenario),
+        [args.seed],
+        policy_name="heuristic",
+        progress=not args.quiet,
+        desc="run (heuristic)",
     )
+    write_records(batch, out / "trajectory.csv")
+    plot_trajectories(
+        batch.z[:, 0, :, :3], scenario, out / "trajectories.png", title="heuristic controller"
+    )
+    events = [
+        {"obstacle": o, "event": name, "t": float(times[0, o])}
+        for name, times in (("activate", batch.activation_time), ("restore", batch.restore_time))
+        for o in range(times.shape[1])
+        if np.isfinite(times[0, o])
+    ]
     summary = {
         "scenario": scenario.name,
         "seed": args.seed,
-        "realised_cost_per_uav": total_cost.tolist(),
-        "min_obstacle_surface_distance_m": min_obstacle,
-        "events": events,
+        "realised_cost_per_uav": batch.stage_cost[:, 0].sum(axis=0).tolist(),
+        "min_obstacle_surface_distance_m": float(batch.obstacle_surface[1:, 0].min()),
+        "collisions": int(batch.collision[:, 0].sum()),
+        "events": sorted(events, key=lambda e: e["t"]),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    print(json.dumps(summary, indent=2))
+    write_json(summary, out / "summary.json")
+    print(json.dumps(json_ready(summary), indent=2))
     return 0
 
 
