@@ -6,6 +6,7 @@ d^o = 70 m; t = 10 s, so the preset velocity is (20, 0, 0) and ê = +x, n̂ = +y
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -227,15 +228,40 @@ def test_guide_is_most_demanding_member_ahead_not_innermost():
     assert state.guide[0, 0, 0] == 1
 
 
+@pytest.mark.parametrize(
+    ("leader_lat", "deadband", "case", "leader_side"),
+    [
+        (-1.0, 2.5, 1, 1),  # on the line: joins the others, no split (deviations §6)
+        (-1.0, 0.0, 2, -1),  # SPEC's sign rule splits it off alone
+        (-3.0, 2.5, 2, -1),  # outside the band: a real side
+        (1.0, 2.5, 1, 1),  # already on the others' side
+    ],
+)
+def test_split_deadband_keeps_a_member_on_the_centre_line(leader_lat, deadband, case, leader_side):
+    avoidance = dataclasses.replace(ONE, split_deadband=deadband)
+    xy = [(-60.0, leader_lat), (-70.0, 10.0), (-70.0, 11.0), (-80.0, 20.0), (-80.0, 21.0)]
+    state, out = step(xy, avoidance=avoidance)
+    assert state.case[0, 0] == case
+    np.testing.assert_array_equal(state.side[0, 0], [leader_side, 1, 1, 1, 1])
+    assert (len(np.unique(out.groups[0])) == 1) == (case == 1)
+
+
+def test_split_deadband_whole_formation_on_the_line_follows_its_mean():
+    avoidance = dataclasses.replace(ONE, split_deadband=2.5)
+    state, _ = step([(-60.0, 1.0), (-70.0, -2.0), (-70.0, -1.5)], avoidance=avoidance)
+    assert state.case[0, 0] == 1
+    np.testing.assert_array_equal(state.side[0, 0], [-1, -1, -1])
+
+
 def test_guide_rechosen_each_step_and_group_ends_without_members_in_range():
     # the - group has no member in range at activation: no guide, counts as ended
-    state, out = step([(-60.0, 0.0), (-60.0, -50.0)])
+    state, out = step([(-60.0, 5.0), (-60.0, -50.0)])
     np.testing.assert_array_equal(state.guide[0, 0], [0, -1])
     np.testing.assert_array_equal(state.ended[0, 0], [False, True])
     assert out.avoiding[0].tolist() == [True, False]
     np.testing.assert_allclose(out.reference_velocity[0, 1], PRESET)
     # its member enters the range: it becomes the guide
-    state, out = step([(-55.0, 0.0), (-55.0, -35.0)], state)
+    state, out = step([(-55.0, 5.0), (-55.0, -35.0)], state)
     np.testing.assert_array_equal(state.guide[0, 0], [0, 1])
     np.testing.assert_array_equal(state.ended[0, 0], [False, False])
     assert out.avoiding[0].all()

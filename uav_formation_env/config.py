@@ -233,9 +233,13 @@ class AvoidanceConfig:
     detection_margin: float = 40.0  # d^o = radius + margin, from the centre [m]
     reference_speed: str = "preset"  # "preset": |v^d| of the schedule; "current": |v_guide|
     min_reference_speed: float = 15.0  # floor of the "current" option [m/s]
+    # UAVs this close to an obstacle's centre line join the other side's group if that avoids a
+    # split (docs/deviations.md §6); 0 is SPEC's sign rule [m]
+    split_deadband: float = 5.0
 
     def __post_init__(self) -> None:
         _positive(self.safety_margin, "avoidance.safety_margin")
+        _non_negative(self.split_deadband, "avoidance.split_deadband")
         _positive(self.detection_margin, "avoidance.detection_margin")
         _require(
             self.detection_margin > self.safety_margin,

@@ -281,8 +281,7 @@ def update_topology(
     chosen = _first_argmin(np.where(candidate, min_dist, np.inf), axis=0)  # (B,)
     activated = candidate & (np.arange(n_obs)[:, None] == chosen)  # (O, B)
     if activated.any():
-        new_side = np.where(lat >= 0.0, 1, -1).astype(np.int8)
-        one_group = (new_side == new_side[:, :1]).all(axis=1)
+        new_side, one_group = _choose_sides(lat, avoidance.split_deadband)
         side = np.where(activated[:, None], new_side, side)
         case = np.where(activated, np.where(one_group, 1, 2), case).astype(np.int8)
         guide = np.where(activated[:, None], -1, guide)
@@ -325,6 +324,31 @@ def update_topology(
             output, active, side, guide, ended, case, geometry, velocities, preset, avoidance
         )
     return new_state, output
+
+
+def _choose_sides(lat: np.ndarray, deadband: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each UAV's side of an obstacle's centre line at activation, and whether that is case 1.
+
+    SPEC §7's rule is the sign of λ_lat. A UAV within ``deadband`` of the centre line has no
+    meaningful side, so if every UAV of one side is that close the whole formation is assigned
+    to the other side (case 1) instead of splitting off a member that sits on the line
+    (docs/deviations.md §6). ``deadband = 0`` is SPEC's rule exactly.
+
+    Args:
+        lat: (O, N, B) lateral coordinates λ_lat [m].
+        deadband: half-width of the band around the centre line [m].
+
+    Returns:
+        ``(side, one_group)``: (O, N, B) int8 sides ±1 and (O, B) bool case 1.
+    """
+    strict = np.where(lat >= 0.0, 1, -1).astype(np.int8)
+    fits_plus = (lat >= -deadband).all(axis=1)  # (O, B): everyone counts as side +1
+    fits_minus = (lat < deadband).all(axis=1)
+    one_group = fits_plus | fits_minus
+    # If both fit (the whole formation is within the band) the mean position decides.
+    whole_side = np.where(fits_plus & (~fits_minus | (lat.mean(axis=1) >= 0.0)), 1, -1)
+    side = np.where(one_group[:, None], whole_side[:, None].astype(np.int8), strict)
+    return side.astype(np.int8), one_group
 
 
 def _idle_output(
