@@ -1,0 +1,158 @@
+"""Running the four variants (in parallel processes) and writing Table 2 and the summary."""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import queue as queue_module
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.evaluation import (
+    EpisodeBatch,
+    json_ready,
+    write_json,
+    write_records,
+)
+from uav_formation_env.reproduce.figures import write_figures
+from uav_formation_env.reproduce.report import build_report
+from uav_formation_env.reproduce.tables import build_summary, write_table2
+from uav_formation_env.reproduce.variants import (
+    VARIANTS,
+    run_variant,
+    variant_scenario,
+)
+
+
+def _worker(args: tuple) -> tuple[str, EpisodeBatch]:
+    variant, base, seeds, duration, policy_seed, channel = args
+
+    def report(done: int) -> None:
+        channel.put(done)
+
+    return variant, run_variant(variant, base, seeds, duration, policy_seed, report)
+
+
+@dataclass
+class Reproduction:
+    """What :func:`reproduce` produced: the episode batches and the summary it wrote."""
+
+    batches: dict[str, EpisodeBatch]
+    summary: dict[str, Any]
+    out: Path
+
+
+def reproduce(
+    out: str | Path,
+    seeds: Sequence[int] = range(5),
+    scenario: str | Path | Scenario = "paper",
+    duration: float | None = None,
+    jobs: int = 0,
+    progress: bool = True,
+    records: bool = False,
+    policy_seed: int | None = None,
+    variants: Sequence[str] = tuple(VARIANTS),
+) -> Reproduction:
+    """Fly the four variants on the same seeds and write the tables, figures and report.
+
+    Args:
+        out: output directory (created).
+        seeds: the episode seeds, shared by every variant.
+        scenario: base scenario (name, YAML path or object); the observer is set per variant.
+        duration: episode length [s] (None: the scenario's, 200 s for the paper).
+        jobs: variants run in parallel processes (1: one after the other in this process;
+            0: one per available CPU, at most one per variant). The numbers do not depend on it.
+        progress: tqdm progress bars.
+        records: also write per-step CSVs per variant.
+        policy_seed: seed of the DMPC optimisers' generator (None: the first episode seed).
+        variants: subset of :data:`VARIANTS` to run (all four for the report's comparison).
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    base = resolve_scenario(scenario)
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("need at least one seed")
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        raise ValueError(f"unknown variant(s) {unknown}; expected some of {list(VARIANTS)}")
+    if policy_seed is None:
+        policy_seed = seeds[0]
+    if int(jobs) <= 0:
+        jobs = available_cpus()
+    jobs = max(1, min(int(jobs), len(variants)))
+    start = time.perf_counter()
+    batches = _run_all(list(variants), base, seeds, duration, policy_seed, jobs, progress)
+    wall = time.perf_counter() - start
+    batches = {v: batches[v] for v in variants}
+
+    summary = json_ready(build_summary(batches, seeds, wall, jobs))
+    write_table2(batches, out / "table2.csv")
+    write_json(summary, out / "summary.json")
+    write_figures(batches, out)
+    (out / "REPORT.md").write_text(build_report(batches, summary))
+    if records:
+        for variant, batch in batches.items():
+            write_records(batch, out / f"records_{variant}.csv")
+    return Reproduction(batches, summary, out)
+
+
+def _run_all(
+    variants: list[str],
+    base: Scenario,
+    seeds: list[int],
+    duration: float | None,
+    policy_seed: int,
+    jobs: int,
+    progress: bool,
+) -> dict[str, EpisodeBatch]:
+    if jobs == 1:
+        return {v: run_variant(v, base, seeds, duration, policy_seed, progress) for v in variants}
+    # slowest first (LFPIO spends about twice PIO's evaluations)
+    order = sorted(variants, key=lambda v: VARIANTS[v][0] != "lfpio")
+    n_steps = variant_scenario(base, variants[0], duration).n_steps
+    context = multiprocessing.get_context("spawn")
+    with context.Manager() as manager:
+        channel = manager.Queue()
+        bar = tqdm(
+            total=n_steps * len(variants),
+            desc=f"{len(variants)} variants x {len(seeds)} seeds",
+            unit="step",
+            disable=not progress,
+        )
+        results: dict[str, EpisodeBatch] = {}
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            futures = [
+                pool.submit(_worker, (v, base, seeds, duration, policy_seed, channel))
+                for v in order
+            ]
+            pending = set(futures)
+            while pending:
+                with contextlib.suppress(queue_module.Empty):
+                    bar.update(channel.get(timeout=0.2))
+                for future in [f for f in pending if f.done()]:
+                    pending.discard(future)
+                    variant, batch = future.result()
+                    results[variant] = batch
+        bar.close()
+    return results
+
+
+def available_cpus() -> int:
+    """CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+# ---------------------------------------------------------------------------------------- tables
