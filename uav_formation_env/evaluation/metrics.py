@@ -1,0 +1,130 @@
+"""Episode metrics (see the package docstring) and the summary of an episode batch."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from uav_formation_env.core.cost import anchored
+from uav_formation_env.evaluation.runner import EpisodeBatch
+
+OBSERVER_WARMUP_S = 10.0  # observer_rms_error counts steps with t > this [s]
+
+
+def _sample_std(x: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Standard deviation over seeds (ddof = 1; 0 for a single seed)."""
+    x = np.asarray(x, dtype=float)
+    if x.shape[axis] < 2:
+        return np.zeros(np.delete(x.shape, axis))
+    return x.std(axis=axis, ddof=1)
+
+
+def formation_rmse(batch: EpisodeBatch) -> np.ndarray:
+    """(B,) RMS over steps and UAVs of each UAV's position error from its formation slot [m]."""
+    cfg = batch.scenario.formation
+    z = batch.z.reshape(-1, *batch.z.shape[2:])  # (T+1)·B rows of (N, 6)
+    a = anchored(z, np.asarray(cfg.offsets, dtype=float), cfg.mirrored_offsets)[..., :3]
+    a = a.reshape(*batch.z.shape[:3], 3)
+    e = a - a.mean(axis=2, keepdims=True)
+    return np.sqrt((e**2).sum(axis=-1).mean(axis=(0, 2)))
+
+
+def observer_rms(batch: EpisodeBatch, after: float = OBSERVER_WARMUP_S) -> np.ndarray | None:
+    """(B,) RMS of estimate - d over steps ending after ``after`` s, UAVs and axes; None without
+    observer or if the episode ends before ``after``."""
+    if not batch.scenario.observer.enabled:
+        return None
+    keep = batch.t[1:] > after + 1e-9
+    if not keep.any():
+        return None
+    error = batch.estimate[1:][keep] - batch.disturbance[keep]  # (T', B, N, 3)
+    return np.sqrt((error**2).mean(axis=(0, 2, 3)))
+
+
+def obstacle_events(batch: EpisodeBatch) -> dict[str, dict[str, Any]]:
+    """Per obstacle ``O1, O2, ...``: activation / restore times per seed and their mean, and the
+    case (1 = one group, 2 = split)."""
+    events = {}
+    for o in range(batch.activation_time.shape[1]):
+        act = batch.activation_time[:, o]
+        res = batch.restore_time[:, o]
+        events[f"O{o + 1}"] = {
+            "activate_s": _nan_mean(act),
+            "restore_s": _nan_mean(res),
+            "activate_s_per_seed": _none_for_nan(act),
+            "restore_s_per_seed": _none_for_nan(res),
+            "case_per_seed": [int(c) for c in batch.case[:, o]],
+        }
+    return events
+
+
+def _time_range(t: np.ndarray, flag: np.ndarray) -> list[float] | None:
+    """[first, last] time where ``flag`` is set, or None."""
+    if not flag.any():
+        return None
+    hit = t[flag]
+    return [round(float(hit[0]), 6), round(float(hit[-1]), 6)]
+
+
+def _nan_mean(x: np.ndarray) -> float | None:
+    x = np.asarray(x, dtype=float)
+    return None if np.isnan(x).all() else round(float(np.nanmean(x)), 6)
+
+
+def _none_for_nan(x: np.ndarray) -> list[float | None]:
+    return [None if np.isnan(v) else round(float(v), 6) for v in x]
+
+
+def summarise(batch: EpisodeBatch) -> dict[str, Any]:
+    """The metrics of the module docstring as a JSON-ready dict."""
+    realised = batch.stage_cost.sum(axis=0)  # (B, N)
+    rmse = formation_rmse(batch)
+    obs_rms = observer_rms(batch)
+    centre = batch.obstacle_center.min(axis=(0, 1)) if batch.obstacle_center.size else None
+    surface = float(batch.obstacle_surface.min())
+    collisions = batch.collision.sum(axis=(0, 2))  # (B,)
+    step_time = batch.policy_seconds + batch.sim_seconds
+    summary: dict[str, Any] = {
+        "policy": batch.policy_name,
+        "scenario": batch.scenario.name,
+        "observer": bool(batch.scenario.observer.enabled),
+        "seeds": list(batch.seeds),
+        "duration_s": float(batch.scenario.duration),
+        "n_steps": batch.n_steps,
+        "triggers_per_uav": None,
+        "triggers_mean": None,
+        "triggers_per_uav_per_seed": None,
+        "realised_cost_per_uav": realised.mean(axis=0).tolist(),
+        "realised_cost_mean": float(realised.mean()),
+        "realised_cost_per_seed": realised.mean(axis=1).tolist(),
+        "formation_rmse_m": float(rmse.mean()),
+        "formation_rmse_m_per_seed": rmse.tolist(),
+        "min_obstacle_surface_distance_m": surface if np.isfinite(surface) else None,
+        "min_obstacle_center_distance_m": None if centre is None else float(centre.min()),
+        "min_obstacle_center_distance_per_obstacle_m": None
+        if centre is None
+        else {f"O{o + 1}": float(c) for o, c in enumerate(centre)},
+        "min_separation_m": float(batch.min_separation[1:].min()),
+        "collisions": int(collisions.sum()),
+        "collisions_per_seed": collisions.astype(int).tolist(),
+        "collision_time_range_s": _time_range(batch.t[1:], batch.collision.any(axis=(1, 2))),
+        "observer_rms_error": None if obs_rms is None else float(np.mean(obs_rms)),
+        "observer_rms_error_per_seed": None if obs_rms is None else obs_rms.tolist(),
+        "events": obstacle_events(batch),
+        "wall_time_per_step_s": float(step_time.mean()),
+        "wall_time_per_step_per_episode_s": float(step_time.mean() / batch.batch_size),
+        "policy_time_per_step_s": float(batch.policy_seconds.mean()),
+        "seconds_per_batch": batch.wall_seconds,
+        "seconds_per_episode": batch.wall_seconds / batch.batch_size,
+    }
+    summary["optimiser_cost_ratio_median"] = None
+    if batch.triggered is not None:
+        counts = batch.triggered.sum(axis=0)  # (B, N)
+        summary["triggers_per_uav"] = counts.mean(axis=0).tolist()
+        summary["triggers_mean"] = float(counts.mean())
+        summary["triggers_per_uav_per_seed"] = counts.astype(int).tolist()
+        if batch.triggered.any() and batch.j_pre is not None and batch.j_exec is not None:
+            ratio = batch.j_exec[batch.triggered] / batch.j_pre[batch.triggered]
+            summary["optimiser_cost_ratio_median"] = float(np.median(ratio))
+    return summary

@@ -1,0 +1,200 @@
+"""The batched episode runner: every seed one copy of one FormationSim, one policy call per step."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from tqdm import tqdm
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.config_io import with_overrides
+from uav_formation_env.core.topology import obstacle_distances
+from uav_formation_env.envs.parallel import observations_of
+from uav_formation_env.evaluation.policies import BatchPolicy
+from uav_formation_env.sim import FormationSim
+
+
+@dataclass
+class EpisodeBatch:
+    """Every step of B episodes run together (one per seed); T control steps, N UAVs, O obstacles.
+
+    Arrays indexed ``[k]`` over T + 1 hold the state at time ``t[k]`` (k = 0 is the reset);
+    arrays over T hold what happened during step k + 1 (from ``t[k]`` to ``t[k + 1]``).
+    """
+
+    scenario: Scenario
+    seeds: list[int]
+    policy_name: str
+    t: np.ndarray  # (T+1,) [s]
+    z: np.ndarray  # (T+1, B, N, 6) [m, m/s]
+    reference_velocity: np.ndarray  # (T+1, B, N, 3) [m/s]
+    estimate: np.ndarray  # (T+1, B, N, 3) observer estimate [m/s^2]
+    groups: np.ndarray  # (T+1, B, N) sub-formation id
+    min_separation: np.ndarray  # (T+1, B, N) [m]
+    obstacle_surface: np.ndarray  # (T+1, B, N) nearest obstacle surface [m]
+    obstacle_center: np.ndarray  # (T+1, B, O) min over UAVs of the distance to each centre [m]
+    u_n: np.ndarray  # (T, B, N, 3) formation input [m/s^2]
+    u_applied: np.ndarray  # (T, B, N, 3) [m/s^2]
+    disturbance: np.ndarray  # (T, B, N, 3) [m/s^2]
+    stage_cost: np.ndarray  # (T, B, N) J_i stage cost of the transition
+    cost_terms: dict[str, np.ndarray]  # name -> (T, B, N)
+    collision: np.ndarray  # (T, B, N) bool, after the step
+    activation_time: np.ndarray  # (B, O) [s], NaN if never
+    restore_time: np.ndarray  # (B, O) [s], NaN if never
+    case: np.ndarray  # (B, O) 1 one group, 2 split, 0 never activated
+    triggered: np.ndarray | None  # (T, B, N) policy's event trigger (DMPC), else None
+    j_pre: np.ndarray | None  # (T, B, N)
+    j_exec: np.ndarray | None  # (T, B, N)
+    policy_seconds: np.ndarray  # (T,) wall time of act_batch per step [s]
+    sim_seconds: np.ndarray  # (T,) wall time of the simulation step + observations [s]
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.t) - 1
+
+    @property
+    def batch_size(self) -> int:
+        return len(self.seeds)
+
+    @property
+    def wall_seconds(self) -> float:
+        return float(self.policy_seconds.sum() + self.sim_seconds.sum())
+
+
+ProgressLike = bool | Callable[[int], None]
+
+
+def run_episodes(
+    scenario: Scenario,
+    policy: BatchPolicy,
+    seeds: Sequence[int],
+    *,
+    duration: float | None = None,
+    policy_name: str = "",
+    progress: ProgressLike = False,
+    desc: str | None = None,
+) -> EpisodeBatch:
+    """Run one episode per seed, all seeds as one batch, with one ``act_batch`` call per step.
+
+    Copy b is seeded with ``seeds[b]`` (a copy reproduces a one-seed run of that seed).
+
+    Args:
+        scenario: the scenario.
+        policy: see the module docstring; it must have been built for ``scenario`` with the same
+            ``duration`` (the observation carries t / duration).
+        seeds: one seed per episode.
+        duration: episode length [s] overriding the scenario's (None: the scenario's).
+        policy_name: label stored in the result.
+        progress: True for a tqdm bar over the steps, or a callable given the number of steps
+            done since its last call.
+        desc: label of the progress bar.
+    """
+    if duration is not None:
+        scenario = with_overrides(scenario, {"duration": float(duration)})
+    seeds = [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("need at least one seed")
+    batch, n_steps = len(seeds), scenario.n_steps
+    sim = FormationSim(scenario, batch_size=batch)
+    if hasattr(policy, "reset"):
+        policy.reset(batch)
+    start = time.perf_counter()
+    result = sim.reset(seed=seeds)
+    obs = observations_of(sim, result)
+
+    def centre_min(z: np.ndarray) -> np.ndarray:
+        if len(sim.obstacle_radii) == 0:
+            return np.zeros((batch, 0))
+        return obstacle_distances(z[..., :3], scenario.avoidance).min(axis=1)
+
+    states = [_state_record(result, centre_min)]
+    steps: list[tuple] = []
+    policy_seconds = np.zeros(n_steps)
+    sim_seconds = np.zeros(n_steps)
+    sim_seconds_reset = time.perf_counter() - start
+    bar = None
+    callback = progress if callable(progress) else None
+    if progress is True:
+        bar = tqdm(total=n_steps, desc=desc or policy_name or "episodes", unit="step")
+    for k in range(n_steps):
+        t0 = time.perf_counter()
+        actions = np.asarray(policy.act_batch(obs), dtype=float)
+        t1 = time.perf_counter()
+        if actions.shape != (batch, scenario.n_uav, 3):
+            raise ValueError(
+                f"policy returned actions of shape {actions.shape}, "
+                f"expected {(batch, scenario.n_uav, 3)}"
+            )
+        result = sim.step(np.clip(actions, -1.0, 1.0) * sim.u_max)
+        obs = observations_of(sim, result)
+        policy_seconds[k] = t1 - t0
+        sim_seconds[k] = time.perf_counter() - t1
+        states.append(_state_record(result, centre_min))
+        steps.append(
+            (
+                result.u_n,
+                result.u_applied,
+                result.disturbance,
+                result.cost.total,
+                result.cost.as_dict(),
+                result.collision,
+            )
+        )
+        if bar is not None:
+            bar.update(1)
+        elif callback is not None:
+            callback(1)
+    if bar is not None:
+        bar.close()
+    sim_seconds[0] += sim_seconds_reset
+    triggered = j_pre = j_exec = None
+    if hasattr(policy, "records"):
+        records = policy.records()
+        if getattr(records, "triggered", None) is not None and len(records.triggered) == n_steps:
+            triggered = np.asarray(records.triggered, dtype=bool)
+            j_pre = np.asarray(records.j_pre, dtype=float)
+            j_exec = np.asarray(records.j_exec, dtype=float)
+    u_n, u_applied, disturbance, stage, terms, collision = zip(*steps)
+    topo = sim.topology
+    return EpisodeBatch(
+        scenario=scenario,
+        seeds=seeds,
+        policy_name=policy_name,
+        t=np.arange(n_steps + 1) * scenario.dynamics.dt,
+        z=np.stack([s[0] for s in states]),
+        reference_velocity=np.stack([s[1] for s in states]),
+        estimate=np.stack([s[2] for s in states]),
+        groups=np.stack([s[3] for s in states]),
+        min_separation=np.stack([s[4] for s in states]),
+        obstacle_surface=np.stack([s[5] for s in states]),
+        obstacle_center=np.stack([s[6] for s in states]),
+        u_n=np.stack(u_n),
+        u_applied=np.stack(u_applied),
+        disturbance=np.stack(disturbance),
+        stage_cost=np.stack(stage),
+        cost_terms={name: np.stack([t[name] for t in terms]) for name in terms[0]},
+        collision=np.stack(collision),
+        activation_time=np.asarray(topo.activation_time, dtype=float).copy(),
+        restore_time=np.asarray(topo.restore_time, dtype=float).copy(),
+        case=np.asarray(topo.case, dtype=int).copy(),
+        triggered=triggered,
+        j_pre=j_pre,
+        j_exec=j_exec,
+        policy_seconds=policy_seconds,
+        sim_seconds=sim_seconds,
+    )
+
+
+def _state_record(result, centre_min) -> tuple[np.ndarray, ...]:
+    return (
+        result.z,
+        result.reference_velocity,
+        result.estimate,
+        result.groups,
+        result.min_separation,
+        result.obstacle_distance,
+        centre_min(result.z),
+    )
