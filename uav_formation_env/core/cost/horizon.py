@@ -1,0 +1,280 @@
+"""J_i over a horizon of candidate input sequences: the MPC objective, prepared once per step."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from uav_formation_env.config import CostConfig
+from uav_formation_env.core.cost.quadratic import (
+    QuadraticCost,
+    SeparationCost,
+    input_response,
+    polarisation_points,
+    state_response,
+)
+from uav_formation_env.core.cost.stage import (
+    CostTerms,
+    NeighbourMoments,
+    anchored,
+    neighbour_moments,
+    others_mask,
+    relative_offset_sign,
+    separation_active,
+    separation_sq,
+    take_flat,
+    velocity_error_sq,
+)
+
+
+@dataclass(frozen=True)
+class HorizonCost:
+    """J_i of candidate sequences, with everything that does not depend on them computed once.
+
+    Built by :func:`prepare_horizon_cost`; :func:`horizon_cost` is ``prepare(...).terms(...)``,
+    so an optimiser that evaluates many populations against the same neighbour predictions uses
+    the same definition without recomputing the senders' side.
+
+    The prediction is affine in the inputs, so it is evaluated by superposition of two
+    :func:`~uav_formation_env.core.dynamics.rollout` results computed once: the free response of
+    ``z0`` (zero inputs) and the response to each unit input component from a zero state (exact
+    by linearity; it avoids the horizon cumsums per population).
+
+    Attributes:
+        free: (B, R, H+1, 6) rollout of the measured states z(t) under zero inputs [m, m/s].
+        response: (3H, (H+1)·6) rollout from rest of each unit input component, row = component
+            of the flattened (H, 3) sequence [m, m/s per m/s^2].
+        own_offset: (B, R, 6) what anchoring subtracts from each receiver's states (± z^d_i).
+        moments: the neighbours' side of the formation error, leading dims (B, R).
+        reference_preview: (B, R, H+1, 3) v^d_i(t + kδ) [m/s].
+        weights: q, r, m, n, s, d_s.
+        others_position: (B, R, S, H+1, 3) each receiver's prediction of every sender's position
+            p̂_j(k) (in the receiver's frame) [m]; only the separation term reads it.
+        others_mask: (B, R, S) 1 for the senders the separation term counts (every other UAV).
+    """
+
+    free: np.ndarray
+    response: np.ndarray
+    own_offset: np.ndarray
+    moments: NeighbourMoments
+    reference_preview: np.ndarray
+    weights: CostConfig
+    others_position: np.ndarray
+    others_mask: np.ndarray
+
+    def predict(self, candidates: np.ndarray) -> np.ndarray:
+        """Predicted states (B, R, P, H+1, 6) of candidates (B, R, P, H, 3), as ``rollout``."""
+        *lead, horizon, _ = candidates.shape
+        forced = candidates.reshape(*lead, 3 * horizon) @ self.response
+        return self.free[:, :, None] + forced.reshape(*lead, horizon + 1, 6)
+
+    def terms(self, candidates: np.ndarray) -> CostTerms:
+        """Named terms of J_i for candidates (B, R, P, H, 3) [m/s^2]; each (B, R, P)."""
+        return self._terms(candidates, with_separation=True)
+
+    def _terms(self, candidates: np.ndarray, with_separation: bool) -> CostTerms:
+        predicted = self.predict(candidates)  # (B, R, P, H+1, 6)
+        own = predicted - self.own_offset[:, :, None, None, :]  # anchored, as anchored()
+        pair_sq = self.moments.error_sq(own)  # (B, R, P, H+1)
+        velocity_sq = velocity_error_sq(predicted[..., 3:], self.reference_preview[:, :, None])
+        w = self.weights
+        formation = w.q * pair_sq[..., :-1].sum(axis=-1)
+        if with_separation and separation_active(w):
+            gap_sq = separation_sq(
+                predicted[..., :3], self.others_position, self.others_mask, w.separation_distance
+            )  # (B, R, P, H+1)
+            separation = w.separation * gap_sq.sum(axis=-1)
+        else:
+            separation = np.zeros_like(formation)
+        return CostTerms(
+            formation=formation,
+            energy=w.r * np.einsum("...hk,...hk->...", candidates, candidates),
+            terminal=w.m * pair_sq[..., -1],
+            velocity=w.n * velocity_sq.sum(axis=-1),
+            separation=separation,
+        )
+
+    def terms_total(self, candidates: np.ndarray) -> np.ndarray:
+        """J_i of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P): ``terms(candidates).total``."""
+        return self.terms(candidates).total
+
+    def take(self, index: np.ndarray) -> HorizonCost:
+        """Receivers ``index`` (M,) of the flattened (B·R) axis as one copy, shapes (1, M, ...)."""
+        return HorizonCost(
+            free=take_flat(self.free, index),
+            response=self.response,
+            own_offset=take_flat(self.own_offset, index),
+            moments=self.moments.take(index),
+            reference_preview=take_flat(self.reference_preview, index),
+            weights=self.weights,
+            others_position=take_flat(self.others_position, index),
+            others_mask=take_flat(self.others_mask, index),
+        )
+
+    def separation_part(self, half_width: np.ndarray | None = None) -> SeparationCost | None:
+        """The separation term on its own, for population evaluation; None if it is off.
+
+        With ``half_width`` (B, R, 3), the per-axis bound ``|u_c(k)| <= half_width_c`` of the
+        candidates (the optimiser's box), only the (receiver, sender) pairs that can come closer
+        than d_s for SOME candidate in the box are kept: a pair is dropped when, at every k, the
+        free-response distance minus the largest displacement the box allows,
+        ``||Σ_m |response_m(k)| half_width||`` per axis, is at least d_s (+1 µm). For candidates
+        inside the box the result is then exactly the full term (the dropped pairs contribute
+        ``max(0, ·) = 0``); outside the box it is not. Without ``half_width`` every pair is kept.
+        """
+        w = self.weights
+        if not separation_active(w):
+            return None
+        batch, n_recv, h1 = self.free.shape[:3]
+        horizon = h1 - 1
+        response = self.response.reshape(3 * horizon, h1, 6)[:, :, :3].reshape(3 * horizon, -1)
+        free = self.free[..., :3]  # (B, R, H+1, 3)
+        keep = np.broadcast_to(self.others_mask > 0, self.others_mask.shape)
+        if half_width is not None:
+            reach = np.tile(np.asarray(half_width, dtype=float), horizon) @ np.abs(response)
+            reach = np.sqrt((reach.reshape(batch, n_recv, h1, 3) ** 2).sum(axis=-1))
+            diff = free[:, :, None] - self.others_position  # (B, R, S, H+1, 3)
+            closest = np.sqrt(np.einsum("...k,...k->...", diff, diff)) - reach[:, :, None]
+            keep = keep & (closest.min(axis=-1) < w.separation_distance + 1e-6)
+        problem, sender = np.nonzero(keep.reshape(batch * n_recv, -1))
+        rows, pair_row = np.unique(problem, return_inverse=True)
+        return SeparationCost(
+            shape=(batch, n_recv),
+            rows=rows,
+            pair_row=pair_row.reshape(-1),
+            free=free.reshape(batch * n_recv, -1)[rows],
+            response=response,
+            others=self.others_position.reshape(batch * n_recv, *self.others_position.shape[2:])[
+                problem, sender
+            ],
+            weight=w.separation,
+            distance=w.separation_distance,
+        )
+
+    def quadratic(self, half_width: np.ndarray | None = None) -> QuadraticCost:
+        """J_i as its quadratic part plus the separation term, for fast population evaluation.
+
+        Without the separation term J_i is exactly quadratic in U (affine prediction, squared
+        norms), so ``J(x) = c + g·x + xᵀ Q x`` with ``x`` = U flattened to n = 3H components. The
+        coefficients of that part are identified from ``1 + 2n + n(n-1)/2`` evaluations of its
+        terms (one call) by polarisation, with no second copy of the formula: ``c = J(0)``,
+        ``g_i = (J(e_i) - J(-e_i)) / 2``, ``Q_ii = (J(e_i) + J(-e_i)) / 2 - c``,
+        ``Q_ij = (J(e_i + e_j) - J(e_i) - J(e_j) + c) / 2``. Their rounding error is about
+        1e-16 · |J| per unit input squared. The separation term (not quadratic) is evaluated
+        directly, for the pairs :meth:`separation_part` keeps with ``half_width`` (exact for
+        candidates in that box; every pair without it).
+        """
+        batch, n_recv = self.free.shape[:2]
+        horizon = self.free.shape[2] - 1
+        n = 3 * horizon
+        points, upper = polarisation_points(n)
+        values = self._terms(
+            np.broadcast_to(
+                points.reshape(-1, horizon, 3), (batch, n_recv) + (len(points), horizon, 3)
+            ),
+            with_separation=False,
+        ).total
+        c = values[..., 0]
+        plus, minus, pairs = (
+            values[..., 1 : n + 1],
+            values[..., n + 1 : 2 * n + 1],
+            values[..., 2 * n + 1 :],
+        )
+        hessian = np.empty((batch, n_recv, n, n))
+        diag = np.arange(n)
+        hessian[..., diag, diag] = 0.5 * (plus + minus) - c[..., None]
+        i, j = upper
+        off = 0.5 * (pairs - plus[..., i] - plus[..., j] + c[..., None])
+        hessian[..., i, j] = off
+        hessian[..., j, i] = off
+        return QuadraticCost(
+            constant=c,
+            linear=0.5 * (plus - minus),
+            hessian=hessian,
+            separation=self.separation_part(half_width),
+        )
+
+
+
+
+def prepare_horizon_cost(
+    z0: np.ndarray,
+    neighbour_trajectories: np.ndarray,
+    reference_preview: np.ndarray,
+    adjacency: np.ndarray,
+    offsets: np.ndarray,
+    weights: CostConfig,
+    dt: float,
+    mirrored: bool = False,
+) -> HorizonCost:
+    """The candidate-independent part of :func:`horizon_cost` (same arguments, no candidates).
+
+    Args:
+        z0: (B, N, 6) measured states at time t [m, m/s].
+        neighbour_trajectories: (B, N, H+1, 6) each UAV's broadcast prediction ẑ_j(k), k = 0..H,
+            seen alike by every receiver; or (B, N, N, H+1, 6) each receiver i's own view of
+            every sender j (``[:, i, j]``), e.g. in i's own frame. The formation terms read the
+            rows with h_ij = 1; the separation term reads the positions of every j ≠ i.
+        reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
+        adjacency: (B, N, N) h_ij, row = receiver.
+        offsets: (N, 6) z^d.
+        weights: q, r, m, n, s, d_s.
+        dt: control step δ [s].
+        mirrored: literal mirrored-offset reading.
+    """
+    per_receiver = neighbour_trajectories.ndim == 5
+    n_uav = offsets.shape[0]
+    send_offsets = (
+        offsets.reshape(1, 1, n_uav, 1, 6) if per_receiver else offsets.reshape(1, n_uav, 1, 6)
+    )
+    others = neighbour_trajectories - relative_offset_sign(mirrored) * send_offsets
+    horizon = reference_preview.shape[-2] - 1
+    batch, n_recv = z0.shape[:2]
+    positions = neighbour_trajectories[..., :3]
+    if not per_receiver:
+        positions = np.broadcast_to(positions[:, None], (batch, n_recv, *positions.shape[1:]))
+    free = (z0 @ state_response(horizon, dt)).reshape(*z0.shape[:-1], horizon + 1, 6)
+    return HorizonCost(
+        free=free,
+        response=input_response(horizon, dt),
+        own_offset=z0 - anchored(z0, offsets, mirrored),
+        moments=neighbour_moments(others, adjacency, per_receiver),
+        reference_preview=reference_preview,
+        weights=weights,
+        others_position=positions,
+        others_mask=others_mask(batch, n_recv),
+    )
+
+
+def horizon_cost(
+    candidates: np.ndarray,
+    z0: np.ndarray,
+    neighbour_trajectories: np.ndarray,
+    reference_preview: np.ndarray,
+    adjacency: np.ndarray,
+    offsets: np.ndarray,
+    weights: CostConfig,
+    dt: float,
+    mirrored: bool = False,
+) -> CostTerms:
+    """J_i of every candidate input sequence of every UAV against its neighbours' predictions.
+
+    Args:
+        candidates: (B, N, P, H, 3) candidate u_n sequences of each UAV [m/s^2].
+        z0: (B, N, 6) measured states at time t [m, m/s].
+        neighbour_trajectories: (B, N, H+1, 6) each UAV's broadcast prediction ẑ_j(k), k = 0..H;
+            or per-receiver views (B, N, N, H+1, 6), see :func:`prepare_horizon_cost`.
+        reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
+        adjacency: (B, N, N) h_ij, row = receiver.
+        offsets: (N, 6) z^d.
+        weights: q, r, m, n, s, d_s.
+        dt: control step δ [s].
+        mirrored: literal mirrored-offset reading.
+
+    Returns:
+        :class:`CostTerms` of shape (B, N, P).
+    """
+    return prepare_horizon_cost(
+        z0, neighbour_trajectories, reference_preview, adjacency, offsets, weights, dt, mirrored
+    ).terms(candidates)

@@ -1,0 +1,182 @@
+"""Exact quadratic form of J_i in the own inputs, the separation remainder, and the linear
+prediction model they are identified with."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from uav_formation_env.core.cost.stage import take_flat
+from uav_formation_env.core.dynamics import rollout
+
+
+@dataclass(frozen=True)
+class SeparationCost:
+    """The separation term of J_i for the pairs that can be active, for population evaluation.
+
+    Built by :meth:`HorizonCost.separation_part`. Problems are the flattened (B·R) receivers;
+    a pair is (problem, sender).
+
+    Attributes:
+        shape: (B, R) of the problem grid.
+        rows: (K,) problems with at least one kept pair.
+        pair_row: (A,) position in ``rows`` of each kept pair's problem.
+        free: (K, (H+1)·3) free-response positions of those problems [m].
+        response: (3H, (H+1)·3) position rows of the unit input responses [m per m/s^2].
+        others: (A, H+1, 3) predicted positions of each pair's sender [m].
+        weight: s [1/m²].
+        distance: d_s [m].
+    """
+
+    shape: tuple[int, int]
+    rows: np.ndarray
+    pair_row: np.ndarray
+    free: np.ndarray
+    response: np.ndarray
+    others: np.ndarray
+    weight: float
+    distance: float
+
+    def total(self, candidates: np.ndarray) -> np.ndarray:
+        """``s Σ_pairs Σ_k max(0, d_s - ||p_i(k) - p̂_j(k)||)²`` of candidates (B, R, P, H, 3)."""
+        batch, n_recv, size = candidates.shape[:3]
+        out = np.zeros((batch * n_recv, size))
+        if self.rows.size:
+            h1 = self.others.shape[1]
+            x = candidates.reshape(batch * n_recv, size, -1)[self.rows]  # (K, P, 3H)
+            position = (x @ self.response + self.free[:, None]).reshape(-1, size, h1, 3)
+            diff = position[self.pair_row] - self.others[:, None]  # (A, P, H+1, 3)
+            gap = np.maximum(self.distance - np.sqrt(np.einsum("...k,...k->...", diff, diff)), 0)
+            per_pair = np.einsum("aph,aph->ap", gap, gap)
+            summed = np.zeros((self.rows.size, size))
+            np.add.at(summed, self.pair_row, per_pair)
+            out[self.rows] = self.weight * summed
+        return out.reshape(batch, n_recv, size)
+
+    def take(self, index: np.ndarray) -> SeparationCost:
+        """Problems ``index`` (M,) of the flattened (B·R) axis as one copy (grid (1, M))."""
+        index = np.asarray(index)
+        position = {int(row): k for k, row in enumerate(self.rows)}
+        new_rows, free, pair_row, others = [], [], [], []
+        for t, flat in enumerate(index.tolist()):
+            k = position.get(int(flat))
+            if k is None:
+                continue
+            pairs = np.flatnonzero(self.pair_row == k)
+            pair_row.extend([len(new_rows)] * pairs.size)
+            new_rows.append(t)
+            free.append(self.free[k])
+            others.append(self.others[pairs])
+        h1 = self.others.shape[1]
+        return SeparationCost(
+            shape=(1, index.size),
+            rows=np.asarray(new_rows, dtype=np.int64),
+            pair_row=np.asarray(pair_row, dtype=np.int64),
+            free=np.asarray(free).reshape(len(new_rows), self.free.shape[1]),
+            response=self.response,
+            others=np.concatenate(others) if others else np.zeros((0, h1, 3)),
+            weight=self.weight,
+            distance=self.distance,
+        )
+
+
+@dataclass(frozen=True)
+class QuadraticCost:
+    """``J(x) = c + g·x + xᵀ Q x + separation(x)`` over flattened candidates x (n = 3H).
+
+    Built by :meth:`HorizonCost.quadratic`; evaluates a population with one batched matmul (plus
+    the separation term of the pairs that can be active, if any).
+
+    Attributes:
+        constant: (B, R) c = J(0) without the separation term.
+        linear: (B, R, n) g.
+        hessian: (B, R, n, n) Q (symmetric; half the Hessian).
+        separation: the separation term, or None if it is off.
+    """
+
+    constant: np.ndarray
+    linear: np.ndarray
+    hessian: np.ndarray
+    separation: SeparationCost | None = None
+
+    def total(self, candidates: np.ndarray) -> np.ndarray:
+        """J_i of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P)."""
+        batch, n_recv, size = candidates.shape[:3]
+        n = self.linear.shape[-1]
+        x = candidates.reshape(batch * n_recv, size, n)
+        y = x @ self.hessian.reshape(batch * n_recv, n, n)
+        y += self.linear.reshape(batch * n_recv, 1, n)
+        total = np.einsum("rpk,rpk->rp", y, x)
+        total += self.constant.reshape(batch * n_recv, 1)
+        total = total.reshape(batch, n_recv, size)
+        if self.separation is not None and self.separation.rows.size:
+            total += self.separation.total(candidates)
+        return total
+
+    def take(self, index: np.ndarray) -> QuadraticCost:
+        """Receivers ``index`` (M,) of the flattened (B·R) axis as one copy, shapes (1, M, ...)."""
+        return QuadraticCost(
+            take_flat(self.constant, index),
+            take_flat(self.linear, index),
+            take_flat(self.hessian, index),
+            None if self.separation is None else self.separation.take(index),
+        )
+
+
+@lru_cache(maxsize=8)
+def polarisation_points(n: int) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """Points 0, e_i, -e_i, e_i + e_j (i < j) as (1 + 2n + n(n-1)/2, n), and the pairs (i, j)."""
+    eye = np.eye(n)
+    i, j = np.triu_indices(n, k=1)
+    points = np.concatenate((np.zeros((1, n)), eye, -eye, eye[i] + eye[j]))
+    for array in (points, i, j):
+        array.flags.writeable = False
+    return points, (i, j)
+
+
+@lru_cache(maxsize=8)
+def input_response(horizon: int, dt: float) -> np.ndarray:
+    """Rollout from rest of every unit input component: (3H, (H+1)·6) [m, m/s per m/s^2].
+
+    Row ``3k + c`` is the predicted trajectory (flattened (H+1, 6)) when only ``u(k)_c = 1``.
+    The result is cached and read-only.
+    """
+    basis = np.eye(3 * horizon).reshape(3 * horizon, horizon, 3)
+    response = rollout(np.zeros(6), basis, dt).reshape(3 * horizon, (horizon + 1) * 6)
+    response.flags.writeable = False
+    return response
+
+
+@lru_cache(maxsize=8)
+def state_response(horizon: int, dt: float) -> np.ndarray:
+    """Rollout under zero inputs of every unit initial-state component: (6, (H+1)·6) [-, s].
+
+    Row ``c`` is the predicted trajectory (flattened (H+1, 6)) from ``z0 = e_c``. The result is
+    cached and read-only.
+    """
+    response = rollout(np.eye(6), np.zeros((6, horizon, 3)), dt).reshape(6, (horizon + 1) * 6)
+    response.flags.writeable = False
+    return response
+
+
+def superposed_rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndarray:
+    """:func:`~uav_formation_env.core.dynamics.rollout` by superposition of its cached unit
+    responses (:func:`state_response`, :func:`input_response`): two matmuls instead of the
+    cumulative sums; the same trajectories up to floating-point rounding.
+
+    Args:
+        z0: (..., 6) initial states [m, m/s].
+        inputs: (..., H, 3) input sequences [m/s^2] (same leading dims).
+        dt: step length [s].
+
+    Returns:
+        (..., H + 1, 6).
+    """
+    *lead, horizon, _ = inputs.shape
+    forced = inputs.reshape(*lead, 3 * horizon) @ input_response(horizon, dt)
+    forced += z0 @ state_response(horizon, dt)
+    return forced.reshape(*lead, horizon + 1, 6)
+
+
