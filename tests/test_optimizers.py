@@ -21,7 +21,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from uav_formation_env.policies import optimizers
 from uav_formation_env.policies.optimizers import (
     COMPILED_AVAILABLE,
     OPTIMIZERS,
@@ -36,6 +35,7 @@ from uav_formation_env.policies.optimizers import (
     n_evaluations,
     weighted_centre,
 )
+from uav_formation_env.policies.optimizers import dispatch as optimizer_dispatch
 
 CONFIGS = {"pio": PIOConfig(), "lfpio": LFPIOConfig(), "pso": PSOConfig()}
 DIMS = (5, 3)
@@ -499,7 +499,7 @@ def test_compiled_lfpio_equals_numpy_bit_for_bit(config, batch, dims) -> None:
 
 
 def test_compiled_true_without_numba_raises(monkeypatch) -> None:
-    monkeypatch.setattr(optimizers, "COMPILED_AVAILABLE", False)
+    monkeypatch.setattr(optimizer_dispatch, "COMPILED_AVAILABLE", False)
     cost, x0, _ = quadratic_problems(seed=0, batch=2, dims=DIMS, condition=1.0)
     with pytest.raises(RuntimeError, match="numba"):
         minimise(cost, x0, -5.0, 5.0, np.random.default_rng(0), LFPIOConfig(), compiled=True)
