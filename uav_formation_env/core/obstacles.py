@@ -21,6 +21,8 @@ import numpy as np
 from uav_formation_env.config import AvoidanceConfig
 
 __all__ = [
+    "choose_sides",
+    "deflection_demand",
     "heading_frame",
     "in_range",
     "obstacle_arrays",
@@ -173,3 +175,51 @@ def obstacle_distances(positions: np.ndarray, avoidance: AvoidanceConfig) -> np.
     positions = np.asarray(positions, dtype=float)
     rel = positions[..., :, None, :2] - centres
     return np.sqrt(rel[..., 0] ** 2 + rel[..., 1] ** 2)
+
+
+def choose_sides(lat: np.ndarray, deadband: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each UAV's side of an obstacle's centre line at activation, and whether that is case 1.
+
+    SPEC §7's rule is the sign of λ_lat. A UAV within ``deadband`` of the centre line has no
+    meaningful side, so if every UAV of one side is that close the whole formation is assigned
+    to the other side (case 1) instead of splitting off a member that sits on the line
+    (docs/deviations.md §6). ``deadband = 0`` is SPEC's rule exactly.
+
+    Args:
+        lat: (O, N, B) lateral coordinates λ_lat [m].
+        deadband: half-width of the band around the centre line [m].
+
+    Returns:
+        ``(side, one_group)``: (O, N, B) int8 sides ±1 and (O, B) bool case 1.
+    """
+    strict = np.where(lat >= 0.0, 1, -1).astype(np.int8)
+    fits_plus = (lat >= -deadband).all(axis=1)  # (O, B): everyone counts as side +1
+    fits_minus = (lat < deadband).all(axis=1)
+    one_group = fits_plus | fits_minus
+    # If both fit (the whole formation is within the band) the mean position decides.
+    whole_side = np.where(fits_plus & (~fits_minus | (lat.mean(axis=1) >= 0.0)), 1, -1)
+    side = np.where(one_group[:, None], whole_side[:, None].astype(np.int8), strict)
+    return side.astype(np.int8), one_group
+
+
+def deflection_demand(
+    rel_x: np.ndarray,
+    rel_y: np.ndarray,
+    dist: np.ndarray,
+    r_safe: np.ndarray,
+    e_hat: np.ndarray,
+    slot_sides: np.ndarray,
+) -> np.ndarray:
+    """Turn each UAV would need to clear the safety circle on each group side.
+
+    Returns the signed angle from ê to the UAV's own tangent direction, positive towards the side
+    of each group slot (``slot_sides``, e.g. (+1, -1)), shape (O, 2, N, B) [rad]. The group's
+    guide is the in-range member with the largest value: the one the group must follow for every
+    member to clear.
+    """
+    sides = np.asarray(slot_sides)[None, :, None, None].astype(float)
+    lx, ly = tangent_direction(
+        rel_x[:, None], rel_y[:, None], dist[:, None], r_safe[:, None, None, None], sides
+    )
+    ex, ey = e_hat[:, 0], e_hat[:, 1]
+    return np.arctan2(sides * (ex * ly - ey * lx), ex * lx + ey * ly)

@@ -64,6 +64,8 @@ import numpy as np
 
 from uav_formation_env.config import AvoidanceConfig, ScheduleConfig
 from uav_formation_env.core.obstacles import (
+    choose_sides,
+    deflection_demand,
     heading_frame,
     in_range,
     obstacle_arrays,
@@ -71,6 +73,7 @@ from uav_formation_env.core.obstacles import (
     relative_geometry,
     tangent_direction,
 )
+from uav_formation_env.core.reference import preset_velocity, reference_preview
 
 __all__ = [
     "ACTIVE",
@@ -87,27 +90,7 @@ __all__ = [
 ]
 
 IDLE, ACTIVE, DONE = 0, 1, 2
-_TIME_TOL = 1e-9  # tolerance of the schedule's "t <= times[k]" [s]
 _SLOT_SIDES = np.array([1, -1], dtype=np.int8)  # side of group slot 0 and 1
-
-
-def preset_velocity(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
-    """Preset desired velocity of eq. 23.
-
-    ``velocities[k]`` holds for ``times[k-1] < t <= times[k]``; t <= times[0] gives the first
-    entry and t > times[-1] the last.
-
-    Args:
-        schedule: switching times and velocities.
-        t: (...) time [s].
-
-    Returns:
-        (..., 3) velocity [m/s].
-    """
-    times = np.asarray(schedule.times, dtype=float)
-    velocities = np.asarray(schedule.velocities, dtype=float).reshape(-1, 3)
-    index = np.searchsorted(times, np.asarray(t, dtype=float) - _TIME_TOL, side="left")
-    return velocities[index]
 
 
 @dataclass
@@ -281,7 +264,7 @@ def update_topology(
     chosen = _first_argmin(np.where(candidate, min_dist, np.inf), axis=0)  # (B,)
     activated = candidate & (np.arange(n_obs)[:, None] == chosen)  # (O, B)
     if activated.any():
-        new_side, one_group = _choose_sides(lat, avoidance.split_deadband)
+        new_side, one_group = choose_sides(lat, avoidance.split_deadband)
         side = np.where(activated[:, None], new_side, side)
         case = np.where(activated, np.where(one_group, 1, 2), case).astype(np.int8)
         guide = np.where(activated[:, None], -1, guide)
@@ -295,7 +278,7 @@ def update_topology(
     if active.any():
         member = side[:, None] == _SLOT_SIDES[:, None, None]  # (O, 2, N, B)
         eligible = member & near[:, None]
-        demand = _deflection(rel_x, rel_y, dist, r_safe, e_hat)  # (O, 2, N, B)
+        demand = deflection_demand(rel_x, rel_y, dist, r_safe, e_hat, _SLOT_SIDES)  # (O, 2, N, B)
         best = _first_argmin(np.where(eligible, -demand, np.inf), axis=2)  # (O, 2, B)
         has_guide = eligible.any(axis=2)
         guide = np.where(active[:, None], np.where(has_guide, best, -1), guide)
@@ -324,31 +307,6 @@ def update_topology(
             output, active, side, guide, ended, case, geometry, velocities, preset, avoidance
         )
     return new_state, output
-
-
-def _choose_sides(lat: np.ndarray, deadband: float) -> tuple[np.ndarray, np.ndarray]:
-    """Each UAV's side of an obstacle's centre line at activation, and whether that is case 1.
-
-    SPEC §7's rule is the sign of λ_lat. A UAV within ``deadband`` of the centre line has no
-    meaningful side, so if every UAV of one side is that close the whole formation is assigned
-    to the other side (case 1) instead of splitting off a member that sits on the line
-    (docs/deviations.md §6). ``deadband = 0`` is SPEC's rule exactly.
-
-    Args:
-        lat: (O, N, B) lateral coordinates λ_lat [m].
-        deadband: half-width of the band around the centre line [m].
-
-    Returns:
-        ``(side, one_group)``: (O, N, B) int8 sides ±1 and (O, B) bool case 1.
-    """
-    strict = np.where(lat >= 0.0, 1, -1).astype(np.int8)
-    fits_plus = (lat >= -deadband).all(axis=1)  # (O, B): everyone counts as side +1
-    fits_minus = (lat < deadband).all(axis=1)
-    one_group = fits_plus | fits_minus
-    # If both fit (the whole formation is within the band) the mean position decides.
-    whole_side = np.where(fits_plus & (~fits_minus | (lat.mean(axis=1) >= 0.0)), 1, -1)
-    side = np.where(one_group[:, None], whole_side[:, None].astype(np.int8), strict)
-    return side.astype(np.int8), one_group
 
 
 def _idle_output(
@@ -425,23 +383,6 @@ def _avoidance_output(
     reference[..., 2] = np.where(avoiding, 0.0, reference[..., 2])
 
 
-def _deflection(
-    rel_x: np.ndarray, rel_y: np.ndarray, dist: np.ndarray, r_safe: np.ndarray, e_hat: np.ndarray
-) -> np.ndarray:
-    """Turn each UAV would need to clear the safety circle on each group side.
-
-    Returns the signed angle from ê to the UAV's own tangent direction, positive towards the side
-    (slot 0: s = +1, slot 1: s = -1), shape (O, 2, N, B) [rad]. The group's guide is the in-range
-    member with the largest value: the one the group must follow for every member to clear.
-    """
-    sides = _SLOT_SIDES[None, :, None, None].astype(float)
-    lx, ly = tangent_direction(
-        rel_x[:, None], rel_y[:, None], dist[:, None], r_safe[:, None, None, None], sides
-    )
-    ex, ey = e_hat[:, 0], e_hat[:, 1]
-    return np.arctan2(sides * (ex * ly - ey * lx), ex * lx + ey * ly)
-
-
 def _first_argmin(values: np.ndarray, axis: int) -> np.ndarray:
     """Index of the first minimum along a (short, non-trailing) axis.
 
@@ -453,34 +394,3 @@ def _first_argmin(values: np.ndarray, axis: int) -> np.ndarray:
     shape[axis] = values.shape[axis]
     index = np.arange(values.shape[axis]).reshape(shape)
     return np.where(values == low, index, values.shape[axis]).min(axis=axis)
-
-
-def reference_preview(
-    schedule: ScheduleConfig,
-    t: np.ndarray,
-    dt: float,
-    horizon: int,
-    reference_now: np.ndarray,
-    avoiding: np.ndarray,
-) -> np.ndarray:
-    """Desired velocity v^d(t + kδ) over the prediction horizon (SPEC §4.3).
-
-    Args:
-        schedule: preset velocity (eq. 23).
-        t: (B,) or scalar current time [s].
-        dt: control step δ [s].
-        horizon: H, number of steps; k = 0..H.
-        reference_now: (B, N, 3) current reference (``TopologyOutput.reference_velocity``) [m/s].
-        avoiding: (B, N) bool, UAVs that hold ``reference_now`` for every k.
-
-    Returns:
-        (B, N, H+1, 3) [m/s]: the schedule at t + k·dt, except avoiding UAVs, which hold
-        ``reference_now``.
-    """
-    reference_now = np.asarray(reference_now, dtype=float)
-    batch = reference_now.shape[0]
-    t = np.broadcast_to(np.asarray(t, dtype=float), (batch,))
-    times = t[:, None] + dt * np.arange(horizon + 1)  # (B, H+1)
-    schedule_part = preset_velocity(schedule, times)[:, None]  # (B, 1, H+1, 3)
-    hold = np.asarray(avoiding, dtype=bool)[:, :, None, None]
-    return np.where(hold, reference_now[:, :, None, :], schedule_part)
