@@ -1,38 +1,8 @@
-"""Headless top-view renderer of a formation (matplotlib Agg) and GIF writing (Pillow).
-
-:class:`TopViewRenderer` builds one :class:`matplotlib.figure.Figure` on a
-:class:`~matplotlib.backends.backend_agg.FigureCanvasAgg` when it is created and only updates its
-artists afterwards, so a frame costs one Agg draw and no pyplot state is touched (``pyplot`` is
-imported only by :meth:`TopViewRenderer.show`, for ``render_mode="human"``).
-
-What a frame shows (top view, x right, y up, equal aspect):
-
-========================  =====================================================================
-Element                   Drawing
-========================  =====================================================================
-UAV ``i``                 filled circle in the UAV's colour, numbered ``i`` (agent ``uav_i``)
-trail                     the UAV's last ``trail_length`` positions, a thin line in its colour
-obstacle                  filled disc of radius ``r`` in :data:`OBSTACLE_COLOR`
-safety circle             dashed circle of radius ``R_s = r + safety_margin``
-communication edge        line between sender ``j`` and receiver ``i`` of ``adjacency[i, j] != 0``,
-                          coloured by sub-formation; only edges inside a group are drawn
-reference velocity        arrow from the UAV, ``arrow_seconds`` seconds of travel long
-collision                 red ring around every UAV flagged in ``collisions``
-time                      ``t = ... s`` in the upper-left corner (and the collision count)
-grid                      light lines at a world-fixed spacing of 1, 2 or 5 x 10^k m (about six
-                          per view); the spacing and the view centre are printed under the time.
-                          With ``show_ticks=True``: matplotlib axes with tick labels instead
-========================  =====================================================================
-
-The view follows the swarm: it is centred on the mean horizontal position and spans ``view_span``
-metres along the shorter image side; with ``fit_swarm`` it widens when the swarm does not fit.
-"""
+"""The top-view frame renderer (see the package docstring for what a frame shows)."""
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -40,70 +10,28 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import LineCollection, PatchCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Circle
-from PIL import Image
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.render.style import (
+    BACKGROUND_COLOR,
+    COLLISION_COLOR,
+    DPI,
+    GROUP_COLORS,
+    MARGIN_BOTTOM,
+    MARGIN_LEFT,
+    MARGIN_RIGHT,
+    MARGIN_TOP,
+    MARKER_DIAMETER,
+    MIN_SIZE_FOR_TICKS,
+    OBSTACLE_COLOR,
+    UAV_COLORS,
+    checked_array,
+    group_edges,
+    nice_grid_step,
+)
 
 if TYPE_CHECKING:
     from uav_formation_env.sim import StepResult
-
-DPI = 100  # figure resolution: one inch is DPI pixels [px/in]
-OBSTACLE_COLOR = "#5f7386"  # obstacle fill and safety-circle colour (opaque, not a pure grey)
-BACKGROUND_COLOR = "#ffffff"
-COLLISION_COLOR = "#ff0000"
-UAV_COLORS = (  # tab10, cycled over UAV indices
-    "#1f77b4",
-    "#ff7f0e",
-    "#2ca02c",
-    "#d62728",
-    "#9467bd",
-    "#8c564b",
-    "#e377c2",
-    "#7f7f7f",
-    "#bcbd22",
-    "#17becf",
-)
-GROUP_COLORS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e", "#e6ab02")  # Dark2
-
-# Axes margins around the plot area [px]: room for the tick labels.
-_MARGIN_LEFT, _MARGIN_BOTTOM, _MARGIN_RIGHT, _MARGIN_TOP = 44, 24, 8, 8
-_MIN_SIZE_FOR_TICKS = 200  # below this width or height [px] the axes fill the image, no ticks
-_MARKER_DIAMETER = 15.0  # UAV marker diameter [px]
-
-
-def group_edges(adjacency: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """Communication edges drawn by the renderer: inside a group, off the diagonal.
-
-    Args:
-        adjacency: (N, N) with ``adjacency[i, j] != 0`` when UAV ``i`` receives from ``j``.
-        groups: (N,) integer sub-formation ids.
-
-    Returns:
-        (E, 2) int64 array of ``(receiver i, sender j)`` pairs, in row-major order.
-    """
-    adjacency = np.asarray(adjacency)
-    groups = np.asarray(groups)
-    same_group = groups[:, None] == groups[None, :]
-    mask = (adjacency != 0) & same_group
-    np.fill_diagonal(mask, False)
-    return np.argwhere(mask).astype(np.int64)
-
-
-def _nice_step(target: float) -> float:
-    """Smallest of 1, 2, 5 times a power of ten that is >= ``target`` (> 0)."""
-    power = 10.0 ** np.floor(np.log10(target))
-    for factor in (1.0, 2.0, 5.0, 10.0):
-        if factor * power >= target * (1 - 1e-9):
-            return float(factor * power)
-    return float(10.0 * power)  # pragma: no cover
-
-
-def _checked(value: Any, shape: tuple[int, ...], name: str, dtype: type = float) -> np.ndarray:
-    array = np.asarray(value, dtype=dtype)
-    if array.shape != shape:
-        raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
-    return array
-
 
 class TopViewRenderer:
     """Fast, headless top-view frames of one scenario copy.
@@ -148,7 +76,7 @@ class TopViewRenderer:
         self.view_span = float(view_span)
         self.fit_swarm = bool(fit_swarm)
         self.arrow_seconds = float(arrow_seconds)
-        self.show_ticks = bool(show_ticks) and min(width, height) >= _MIN_SIZE_FOR_TICKS
+        self.show_ticks = bool(show_ticks) and min(width, height) >= MIN_SIZE_FOR_TICKS
         self._trail: deque[np.ndarray] = deque(maxlen=self.trail_length)
         self._window: Any = None  # (pyplot figure, AxesImage) of show(), created lazily
         self._build_figure()
@@ -162,10 +90,10 @@ class TopViewRenderer:
         self.canvas = FigureCanvasAgg(self.figure)
         if self.show_ticks:
             rect = (
-                _MARGIN_LEFT / self.width,
-                _MARGIN_BOTTOM / self.height,
-                1.0 - (_MARGIN_LEFT + _MARGIN_RIGHT) / self.width,
-                1.0 - (_MARGIN_BOTTOM + _MARGIN_TOP) / self.height,
+                MARGIN_LEFT / self.width,
+                MARGIN_BOTTOM / self.height,
+                1.0 - (MARGIN_LEFT + MARGIN_RIGHT) / self.width,
+                1.0 - (MARGIN_BOTTOM + MARGIN_TOP) / self.height,
             )
         else:
             rect = (0.0, 0.0, 1.0, 1.0)
@@ -228,7 +156,7 @@ class TopViewRenderer:
             color="0.15",
             zorder=4,
         )
-        marker_area = (_MARKER_DIAMETER * 72.0 / DPI) ** 2  # [pt^2]
+        marker_area = (MARKER_DIAMETER * 72.0 / DPI) ** 2  # [pt^2]
         self._markers = ax.scatter(
             zeros,
             zeros,
@@ -309,14 +237,14 @@ class TopViewRenderer:
             (height, width, 3) uint8 RGB image.
         """
         n = self.n_uav
-        positions = _checked(positions, (n, 3), "positions")
-        velocity = _checked(reference_velocity, (n, 3), "reference_velocity")
-        adjacency = _checked(adjacency, (n, n), "adjacency")
-        groups = _checked(groups, (n,), "groups", dtype=np.int64)
+        positions = checked_array(positions, (n, 3), "positions")
+        velocity = checked_array(reference_velocity, (n, 3), "reference_velocity")
+        adjacency = checked_array(adjacency, (n, n), "adjacency")
+        groups = checked_array(groups, (n,), "groups", dtype=np.int64)
         collided = (
             np.zeros(n, dtype=bool)
             if collisions is None
-            else _checked(collisions, (n,), "collisions", dtype=bool)
+            else checked_array(collisions, (n,), "collisions", dtype=bool)
         )
         if self.trail_length > 0:
             self._trail.append(positions.copy())
@@ -448,7 +376,7 @@ class TopViewRenderer:
         self.axes.set_xlim(x0, x1)
         self.axes.set_ylim(y0, y1)
         if self._grid is not None:
-            step = _nice_step(span / 6.0)
+            step = nice_grid_step(span / 6.0)
             self._grid_step = step
             xs = np.arange(np.ceil(x0 / step), np.floor(x1 / step) + 1) * step
             ys = np.arange(np.ceil(y0 / step), np.floor(y1 / step) + 1) * step
@@ -464,46 +392,3 @@ class TopViewRenderer:
         return np.array(out, dtype=np.uint8, order="C")
 
 
-def write_gif(frames: Sequence[np.ndarray], path: str | Path, fps: float = 10) -> Path:
-    """Write RGB frames as a looping animated GIF with Pillow.
-
-    Each frame is quantised to its own 256-colour palette (Pillow's fast octree: about 3x faster
-    than Pillow's default conversion, mean error about 1/255 on rendered frames). Pillow merges
-    identical consecutive frames into one frame of the summed duration, so the file may hold
-    fewer frames than given while playing for the same time.
-
-    Args:
-        frames: non-empty sequence of (H, W, 3) uint8 RGB images of one size.
-        path: output file (its directory must exist).
-        fps: frames per second; GIF delays are whole centiseconds, so the delay is rounded.
-
-    Returns:
-        The path written.
-    """
-    if len(frames) == 0:
-        raise ValueError("write_gif needs at least one frame")
-    if not fps > 0:
-        raise ValueError(f"fps must be > 0, got {fps}")
-    shape = np.shape(frames[0])
-    images = []
-    for k, frame in enumerate(frames):
-        array = np.asarray(frame)
-        if array.shape != shape or array.ndim != 3 or array.shape[2] != 3:
-            raise ValueError(f"frame {k} has shape {array.shape}; expected (H, W, 3) like frame 0")
-        if array.dtype != np.uint8:
-            raise ValueError(f"frame {k} has dtype {array.dtype}; expected uint8")
-        images.append(Image.fromarray(array).quantize(256, method=Image.Quantize.FASTOCTREE))
-    path = Path(path)
-    duration_ms = max(10, int(round(100.0 / fps)) * 10)
-    images[0].save(
-        path,
-        format="GIF",
-        save_all=True,
-        append_images=images[1:],
-        duration=duration_ms,
-        loop=0,
-    )
-    return path
-
-
-__all__ = ["COLLISION_COLOR", "OBSTACLE_COLOR", "TopViewRenderer", "group_edges", "write_gif"]

@@ -1,0 +1,35 @@
+"""Headless top-view renderer of a formation (matplotlib Agg) and GIF writing (Pillow).
+
+:class:`TopViewRenderer` builds one :class:`matplotlib.figure.Figure` on a
+:class:`~matplotlib.backends.backend_agg.FigureCanvasAgg` when it is created and only updates its
+artists afterwards, so a frame costs one Agg draw and no pyplot state is touched (``pyplot`` is
+imported only by :meth:`TopViewRenderer.show`, for ``render_mode="human"``).
+
+What a frame shows (top view, x right, y up, equal aspect):
+
+========================  =====================================================================
+Element                   Drawing
+========================  =====================================================================
+UAV ``i``                 filled circle in the UAV's colour, numbered ``i`` (agent ``uav_i``)
+trail                     the UAV's last ``trail_length`` positions, a thin line in its colour
+obstacle                  filled disc of radius ``r`` in :data:`OBSTACLE_COLOR`
+safety circle             dashed circle of radius ``R_s = r + safety_margin``
+communication edge        line between sender ``j`` and receiver ``i`` of ``adjacency[i, j] != 0``,
+                          coloured by sub-formation; only edges inside a group are drawn
+reference velocity        arrow from the UAV, ``arrow_seconds`` seconds of travel long
+collision                 red ring around every UAV flagged in ``collisions``
+time                      ``t = ... s`` in the upper-left corner (and the collision count)
+grid                      light lines at a world-fixed spacing of 1, 2 or 5 x 10^k m (about six
+                          per view); the spacing and the view centre are printed under the time.
+                          With ``show_ticks=True``: matplotlib axes with tick labels instead
+========================  =====================================================================
+
+The view follows the swarm: it is centred on the mean horizontal position and spans ``view_span``
+metres along the shorter image side; with ``fit_swarm`` it widens when the swarm does not fit.
+"""
+
+from uav_formation_env.render.gif import write_gif
+from uav_formation_env.render.style import COLLISION_COLOR, OBSTACLE_COLOR, group_edges
+from uav_formation_env.render.top_view import TopViewRenderer
+
+__all__ = ["COLLISION_COLOR", "OBSTACLE_COLOR", "TopViewRenderer", "group_edges", "write_gif"]
