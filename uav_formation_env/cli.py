@@ -229,10 +229,32 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_common(reproduce)
     reproduce.set_defaults(func=_reproduce)
+
+    # Listed here for --help only: main() hands every argument after "train" to baselines.train.
+    sub.add_parser(
+        "train",
+        help="train PPO or SAC with one policy shared by all UAVs (the [rl] extra; "
+        "`uav-formation train --help` for its options)",
+        add_help=False,
+    )
     return parser
 
 
+def _train(argv: list[str]) -> int:
+    try:
+        from baselines.train import main as train_main
+    except ImportError as error:
+        raise SystemExit(
+            "uav-formation train needs the [rl] extra (torch, stable-baselines3) and the "
+            f"baselines package of this repository: {error}"
+        ) from error
+    return int(train_main(argv))
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["train"]:
+        return _train(argv[1:])
     args = build_parser().parse_args(argv)
     return int(args.func(args))
 
