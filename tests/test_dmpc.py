@@ -555,3 +555,43 @@ def test_separation_prevents_the_start_collisions() -> None:
         closest[name] = low
     assert closest["paper"] < scenario.collision.uav_distance
     assert closest["ours"] > scenario.collision.uav_distance
+
+
+# ------------------------------------------------------------------------------------------------
+# exact best-response optimisers (issue 6; more in tests/test_best_response.py)
+# ------------------------------------------------------------------------------------------------
+
+
+def test_exact_and_nash_optimizer_names_and_records(scenario) -> None:
+    from uav_formation_env.policies.best_response import ExactConfig
+    from uav_formation_env.policies.dmpc import POLICY_OPTIMIZERS
+    from uav_formation_env.policies.nash import NashConfig
+
+    assert POLICY_OPTIMIZERS == ("pio", "lfpio", "pso", "exact", "nash")
+    assert isinstance(NashDMPCPolicy(scenario, optimizer="EXACT").optimizer, ExactConfig)
+    assert isinstance(NashDMPCPolicy(scenario, optimizer="nash").optimizer, NashConfig)
+    with pytest.raises(ValueError):
+        NashDMPCPolicy(scenario, optimizer="nash", inner_rounds=3)
+    # the one-shot optimisers record no Nash sweeps
+    policy = NashDMPCPolicy(scenario, seed=0)
+    closed_loop(policy, FormationSim(scenario), 2)
+    rec = policy.records()
+    np.testing.assert_array_equal(rec.nash_iterations, np.zeros((2, 1), dtype=np.int64))
+    assert rec.nash_converged.shape == (2, 1) and rec.nash_converged.all()
+    empty = NashDMPCPolicy(scenario).records()
+    assert empty.nash_iterations.shape == (0, 1)
+
+
+def test_exact_optimizer_with_inner_rounds_and_the_separation_term() -> None:
+    """The two UAVs placed 2.5 m apart are pushed apart by the exact answers too, and K = 3
+    rounds of exact best responses spend one identification (136 evaluations) per round."""
+    scenario = paper_scenario()
+    _, obs, _ = close_start(scenario, gap=2.5)
+    policy = NashDMPCPolicy(scenario, "exact", threshold=ALWAYS, inner_rounds=3)
+    policy.act_batch(obs)
+    first = policy.plans[0, :, 0]
+    assert first[0, 1] < 0.0 < first[2, 1]
+    rec = policy.records()
+    assert (rec.j_exec <= rec.j_pre).all()
+    assert (rec.evaluations >= 3 * 136).all()
+    np.testing.assert_array_equal(rec.evaluations[0, 0, [1, 3, 4]], 3 * 136)

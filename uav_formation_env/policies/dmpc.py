@@ -47,6 +47,13 @@ Algorithm per control step, for every UAV i simultaneously (a Jacobi best-respon
 5. Apply element 0 (the action is ``u_n(0|t) / u_max``; the plant adds ``u_d``) and broadcast the
    whole output sequence.
 
+Exact alternatives to the metaheuristics (:mod:`uav_formation_env.policies.best_response`,
+:mod:`uav_formation_env.policies.nash`): ``optimizer="exact"`` replaces PIO / LFPIO in step 4 by
+the exact minimiser of J_i over the box (a box-constrained QP on J_i's identified quadratic form;
+same trigger, same never-worse-than-W rule); ``optimizer="nash"`` replaces step 4 by iterated
+exact best responses of the triggered UAVs (the untriggered ones keep W_i) from the warm starts
+until the profile is a Nash equilibrium of the horizon game among them.
+
 With ``inner_rounds = K > 1`` steps 2-4 repeat K times per step against the neighbours' outputs
 of the previous round (not shifted: same time), each round with the same event trigger. K = 1 is
 the paper's scheme.
@@ -73,11 +80,14 @@ from uav_formation_env.core.observation import (
     decode_observations,
     observation_dim,
 )
+from uav_formation_env.policies.best_response import ExactConfig, best_response
 from uav_formation_env.policies.broadcast import (
+    HorizonProblems,
     horizon_problems,
     observed_time,
     shift_warm_start,
 )
+from uav_formation_env.policies.nash import NashConfig, iterated_best_response
 from uav_formation_env.policies.optimizers import (
     OPTIMIZERS,
     LFPIOConfig,
@@ -86,20 +96,33 @@ from uav_formation_env.policies.optimizers import (
     minimise,
 )
 
-__all__ = ["DEFAULT_THRESHOLD", "DMPCRecords", "NashDMPCPolicy", "shift_warm_start"]
+__all__ = [
+    "DEFAULT_THRESHOLD",
+    "DMPCRecords",
+    "NashDMPCPolicy",
+    "POLICY_OPTIMIZERS",
+    "shift_warm_start",
+]
 
 DEFAULT_THRESHOLD = 10.0  # event-trigger threshold on J_i(W) (SPEC §5) [-]
 
-OptimizerLike = str | PIOConfig | LFPIOConfig | PSOConfig
+OptimizerConfig = PIOConfig | LFPIOConfig | PSOConfig | ExactConfig | NashConfig
+OptimizerLike = str | OptimizerConfig
+_CONFIGS: dict[str, type[OptimizerConfig]] = {
+    **OPTIMIZERS,
+    "exact": ExactConfig,
+    "nash": NashConfig,
+}
+POLICY_OPTIMIZERS = tuple(_CONFIGS)  # the optimiser names NashDMPCPolicy accepts
 
 
-def _optimizer_config(optimizer: OptimizerLike) -> PIOConfig | LFPIOConfig | PSOConfig:
-    if isinstance(optimizer, PIOConfig | LFPIOConfig | PSOConfig):
+def _optimizer_config(optimizer: OptimizerLike) -> OptimizerConfig:
+    if isinstance(optimizer, OptimizerConfig):
         return optimizer
-    if isinstance(optimizer, str) and optimizer.lower() in OPTIMIZERS:
-        return OPTIMIZERS[optimizer.lower()]()
+    if isinstance(optimizer, str) and optimizer.lower() in _CONFIGS:
+        return _CONFIGS[optimizer.lower()]()
     raise ValueError(
-        f"unknown optimizer {optimizer!r}: expected one of {sorted(OPTIMIZERS)} or a config object"
+        f"unknown optimizer {optimizer!r}: expected one of {sorted(_CONFIGS)} or a config object"
     )
 
 
@@ -115,8 +138,16 @@ class DMPCRecords:
         evaluations: (T, B, N) the optimiser's cost evaluations (its budget: 1830 for LFPIO,
             810 for PIO; 0 when not triggered). With ``population_cost="quadratic"`` these are
             quadratic-form evaluations; identifying the form costs 1 + 2n + n(n-1)/2 = 136 (H = 5)
-            direct evaluations of J_i per triggered UAV, not counted here.
+            direct evaluations of J_i per triggered UAV, not counted here. For ``"exact"`` and
+            ``"nash"`` they are exactly those identification evaluations (136 per best response;
+            plus the refinement's candidates where the separation term is active), summed over
+            the best responses the UAV computed (``"nash"``: one per sweep, plus the final gap
+            check); the solve itself evaluates nothing.
         wall_time: (T,) wall-clock time of the whole step, all copies and UAVs [s].
+        nash_iterations: (T, B) sweeps of iterated best response (``"nash"``; 0 for the other
+            optimisers and for copies where no UAV was triggered).
+        nash_converged: (T, B) bool, the ``"nash"`` profile met its gap tolerance (True for the
+            other optimisers).
     """
 
     time: np.ndarray
@@ -125,6 +156,8 @@ class DMPCRecords:
     j_exec: np.ndarray
     evaluations: np.ndarray
     wall_time: np.ndarray
+    nash_iterations: np.ndarray | None = None
+    nash_converged: np.ndarray | None = None
 
 
 class NashDMPCPolicy:
@@ -137,10 +170,15 @@ class NashDMPCPolicy:
         scenario: the scenario (or its name, YAML path or mapping): offsets, weights, horizon, δ,
             duration, u_max and the preset-velocity schedule.
         optimizer: ``"lfpio"`` (the paper's), ``"pio"``, ``"pso"`` (same budget as LFPIO by
-            default), or a :class:`PIOConfig` / :class:`LFPIOConfig` / :class:`PSOConfig`.
+            default), ``"exact"`` (exact best response), ``"nash"`` (iterated exact best
+            responses to an equilibrium each step), or a :class:`PIOConfig` /
+            :class:`LFPIOConfig` / :class:`PSOConfig` / :class:`ExactConfig` /
+            :class:`NashConfig` (the last sets the sweep cap, tolerance and Jacobi /
+            Gauss-Seidel).
         seed: seed of the one random generator (same seed and observations, same actions).
         threshold: event-trigger threshold on J_i(W) [-].
-        inner_rounds: K exchange / re-optimise rounds per step (SPEC §5; 1 = the paper).
+        inner_rounds: K exchange / re-optimise rounds per step (SPEC §5; 1 = the paper; must be 1
+            for ``"nash"``, which iterates to equilibrium itself).
         population_cost: how the optimiser's populations are evaluated: ``"quadratic"`` (J_i's
             exact quadratic coefficients, identified once per step from the one definition, plus
             the separation term of the pairs that can be active in the search box, see
@@ -169,6 +207,8 @@ class NashDMPCPolicy:
             raise ValueError(f"threshold must be finite, got {threshold!r}")
         self.scenario = resolve_scenario(scenario)
         self.optimizer = _optimizer_config(optimizer)
+        if isinstance(self.optimizer, NashConfig) and inner_rounds != 1:
+            raise ValueError("inner_rounds must be 1 with the 'nash' optimizer")
         self.threshold = float(threshold)
         self.inner_rounds = int(inner_rounds)
         self.population_cost = population_cost
@@ -245,10 +285,17 @@ class NashDMPCPolicy:
         decoded = decode_observations(obs, self.n_uav)
         self._restart(decoded.time_fraction[:, 0] == 0.0)
         assert self._plans is not None
-        output, triggered, j_pre, j_exec, evals = self._solve(decoded, self._plans)
+        batch = obs.shape[0]
+        sweeps, converged = np.zeros(batch, dtype=np.int64), np.ones(batch, dtype=bool)
+        if isinstance(self.optimizer, NashConfig):
+            output, triggered, j_pre, j_exec, evals, sweeps, converged = self._solve_nash(
+                decoded, self._plans, self.optimizer
+            )
+        else:
+            output, triggered, j_pre, j_exec, evals = self._solve(decoded, self._plans)
         self._plans = output
         t = observed_time(decoded.time_fraction[:, 0], self.scenario.duration, self.dt)
-        self._records.append((t, triggered, j_pre, j_exec, evals))
+        self._records.append((t, triggered, j_pre, j_exec, evals, sweeps, converged))
         self._wall.append(time.perf_counter() - start)
         return np.clip(output[..., 0, :] / self.u_max, -1.0, 1.0)
 
@@ -314,9 +361,11 @@ class NashDMPCPolicy:
                 j_exec=empty.copy(),
                 evaluations=empty.astype(np.int64),
                 wall_time=np.zeros(0),
+                nash_iterations=np.zeros((0, batch), dtype=np.int64),
+                nash_converged=np.zeros((0, batch), dtype=bool),
             )
-        t, trig, pre, exe, evals = (np.stack(x) for x in zip(*self._records))
-        return DMPCRecords(t, trig, pre, exe, evals, np.asarray(self._wall))
+        t, trig, pre, exe, evals, sweeps, conv = (np.stack(x) for x in zip(*self._records))
+        return DMPCRecords(t, trig, pre, exe, evals, np.asarray(self._wall), sweeps, conv)
 
     def trigger_counts(self) -> np.ndarray:
         """(B, N) number of triggered steps per copy and UAV since the last reset."""
@@ -357,26 +406,74 @@ class NashDMPCPolicy:
                 continue
             sub = problems.cost.take(index)  # the M triggered problems as one copy
             half = problems.half_width.reshape(-1, 3)[index][:, None, :]  # (M, 1, 3)
-            if self.population_cost == "quadratic":
-                population_cost = sub.quadratic(half_width=half[None, :, 0]).total
-            else:
-                population_cost = sub.terms_total
             x0 = current.reshape(-1, h, 3)[index]
-            result = minimise(
-                lambda x, f=population_cost: f(x[None])[0],
-                x0,
-                -half,
-                half,
-                self.rng,
-                self.optimizer,
-            )
+            if isinstance(self.optimizer, ExactConfig):
+                # The exact minimiser over the box; no random draws, so the generator's stream
+                # is untouched.
+                exact = best_response(HorizonProblems(sub, half[None, :, 0]), x0=x0[None])
+                result_x, n_evals = exact.x[0], exact.evaluations[0]
+            else:
+                if self.population_cost == "quadratic":
+                    population_cost = sub.quadratic(half_width=half[None, :, 0]).total
+                else:
+                    population_cost = sub.terms_total
+                result = minimise(
+                    lambda x, f=population_cost: f(x[None])[0],
+                    x0,
+                    -half,
+                    half,
+                    self.rng,
+                    self.optimizer,
+                )
+                result_x, n_evals = result.x, result.n_evals
             # Exact J_i of the optimiser's best; keep W where it is not strictly better.
-            found = sub.terms(result.x[None, :, None]).total[0, :, 0]
+            found = sub.terms(result_x[None, :, None]).total[0, :, 0]
             better = found < j_cur.reshape(-1)[index]
             flat = current.reshape(-1, h, 3).copy()
-            flat[index[better]] = result.x[better]
+            flat[index[better]] = result_x[better]
             current = flat.reshape(current.shape)
             j_cur = j_cur.copy()
             j_cur.reshape(-1)[index[better]] = found[better]
-            evals.reshape(-1)[index] += result.n_evals
+            evals.reshape(-1)[index] += n_evals
         return current, triggered, j_pre, j_cur, evals
+
+    def _solve_nash(
+        self, decoded: DecodedObservation, plans: np.ndarray, config: NashConfig
+    ) -> tuple[np.ndarray, ...]:
+        """Warm start, trigger, and an equilibrium among the triggered UAVs of every copy.
+
+        The triggered UAVs iterate exact best responses from the warm starts (the untriggered
+        keep W_i and are not players) until every player's Nash gap is within the tolerance.
+
+        Returns:
+            ``(output (B, N, H, 3), triggered, j_pre, j_exec, evaluations, sweeps (B,),
+            converged (B,))``; ``j_exec`` is J_i of the output against the output profile.
+        """
+        warm = shift_warm_start(plans)
+        problems = horizon_problems(decoded, warm, self.scenario)
+        j_pre = problems.cost.terms(warm[:, :, None]).total[..., 0]
+        triggered = j_pre > self.threshold
+        batch = warm.shape[0]
+        if not triggered.any():
+            zeros = np.zeros(batch, dtype=np.int64)
+            evals = np.zeros(triggered.shape, dtype=np.int64)
+            return warm, triggered, j_pre, j_pre, evals, zeros, np.ones(batch, dtype=bool)
+        solution = iterated_best_response(
+            decoded,
+            self.scenario,
+            warm,
+            method=config.method,
+            max_iter=config.max_iter,
+            tol=config.tol,
+            playing=triggered,
+        )
+        # A copy with no player stopped at sweep 0 with its warm starts and their costs.
+        return (
+            solution.plans,
+            triggered,
+            j_pre,
+            solution.gap.cost,
+            solution.evaluations,
+            solution.iterations,
+            solution.converged,
+        )
