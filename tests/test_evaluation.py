@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -180,3 +181,43 @@ def test_summary_is_standard_json_when_the_episode_ends_before_the_observer_wind
     summary = json.loads(text, parse_constant=reject)
     assert summary["observer"] is True and summary["observer_rms_error"] is None
     assert summary["triggers_mean"] == 20
+
+
+def test_policy_plans_pass_dmpc_plans_and_hold_other_actions_in_the_box():
+    from uav_formation_env.config_io import resolve_scenario
+    from uav_formation_env.core.observation import ESTIMATE_SCALE, observation_dim
+    from uav_formation_env.evaluation import policy_plans
+
+    scenario = resolve_scenario("paper")
+    n, horizon, u_max = scenario.n_uav, scenario.cost.horizon, scenario.dynamics.u_max
+    obs = np.zeros((1, n, observation_dim(n)), dtype=np.float32)
+    obs[0, 0, 9:12] = np.array([1.0, -2.0, 0.0]) / ESTIMATE_SCALE  # estimate of UAV 0 [m/s^2]
+    actions = np.full((1, n, 3), 0.9)  # 4.5 m/s^2 on every axis
+    plans = policy_plans(HeuristicPolicy(scenario), obs, actions, scenario)
+    assert plans.shape == (1, n, horizon, 3)
+    # UAV 0's box is |u| <= u_max - |estimate| = (4, 3, 5): the held action is clipped to it
+    np.testing.assert_allclose(plans[0, 0], np.tile([4.0, 3.0, 4.5], (horizon, 1)))
+    np.testing.assert_allclose(plans[0, 1:], 0.9 * u_max)
+
+    class Broadcasting:
+        plans = np.arange(n * horizon * 3, dtype=float).reshape(1, n, horizon, 3)
+
+    np.testing.assert_array_equal(
+        policy_plans(Broadcasting(), obs, actions, scenario), Broadcasting.plans
+    )
+
+
+def test_nash_gap_summary_counts_only_plans_in_the_box():
+    from uav_formation_env.evaluation import nash_gap_summary
+
+    batch = SimpleNamespace(
+        nash_gap=np.array([[[1.0, 3.0]], [[-5.0, 2.0]]]),  # (T=2, B=1, N=2)
+        nash_cost=np.array([[[10.0, 10.0]], [[10.0, 4.0]]]),
+        nash_in_box=np.array([[[True, True]], [[False, True]]]),
+    )
+    s = nash_gap_summary(batch)
+    assert s["median"] == 2.0 and s["mean"] == 2.0 and s["max"] == 3.0
+    assert s["relative_median"] == pytest.approx(0.3)  # 0.1, 0.3, 0.5
+    assert s["in_box_fraction"] == 0.75
+    unmeasured = SimpleNamespace(nash_gap=None, nash_cost=None, nash_in_box=None)
+    assert nash_gap_summary(unmeasured) is None

@@ -105,3 +105,19 @@ def test_trigger_outliers_finds_the_seed_and_its_window():
     )
     [(seed, mean, start, end, excess)] = trigger_outliers(batch)
     assert (seed, mean, start, end, excess) == (12, 300.0, 80.0, 100.0, 100.0)
+
+
+def test_nash_gap_table_covers_every_variant_and_exact_solvers_are_closest(quick_run):
+    with open(quick_run / "nash_gap.csv", newline="") as stream:
+        rows = {r["variant"]: r for r in csv.DictReader(stream)}
+    assert list(rows) == [*VARIANTS, "pso_nftsmo", "exact_nftsmo", "nash_nftsmo"]
+    gap = {name: float(r["gap_median"]) for name, r in rows.items()}
+    assert all(g >= 0.0 for g in gap.values())
+    # iterating best responses reaches the equilibrium the others only approach
+    assert gap["nash_nftsmo"] < 1e-6 < gap["lfpio_nftsmo"]
+    assert gap["exact_nftsmo"] < gap["lfpio_nftsmo"] and gap["exact_nftsmo"] < gap["pio_nftsmo"]
+    assert (quick_run / "fig10_nash_gap.png").stat().st_size > 10_000
+    report = (quick_run / "REPORT.md").read_text()
+    assert "How close to a Nash equilibrium?" in report and "LFPIO vs PIO" in report
+    summary = json.loads((quick_run / "summary.json").read_text())
+    assert set(summary["nash_gap"]) == set(rows)

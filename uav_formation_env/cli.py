@@ -156,6 +156,7 @@ def _reproduce(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         progress=not args.quiet,
         records=args.records,
+        game_variants=[] if args.game_variants == ["none"] else args.game_variants,
     )
     summary = result.summary
     print(f"wall time {summary['wall_time_s']:.1f} s ({len(summary['seeds'])} seeds)")
@@ -166,7 +167,12 @@ def _reproduce(args: argparse.Namespace) -> int:
             f"(paper {s['paper_triggers_mean']:g}) | min centre dist "
             f"{s['min_obstacle_center_distance_m']:.1f} m | collisions {s['collisions']}"
         )
-    print(f"wrote {result.out}/table2.csv, summary.json, REPORT.md and figures")
+    for row in summary["nash_gap"].values():
+        print(
+            f"{row['label']:>40}: Nash gap median {row['gap_median']:.3g} "
+            f"p90 {row['gap_p90']:.3g} | {row['policy_ms_per_step']:.2f} ms/step"
+        )
+    print(f"wrote {result.out}/table2.csv, nash_gap.csv, summary.json, REPORT.md and figures")
     return 0
 
 
@@ -226,6 +232,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     reproduce.add_argument(
         "--records", action="store_true", help="also write records_<variant>.csv per step"
+    )
+    reproduce.add_argument(
+        "--game-variants",
+        nargs="+",
+        default=["pso_nftsmo", "exact_nftsmo", "nash_nftsmo"],
+        metavar="VARIANT",
+        help="more solvers of the game for the Nash-gap comparison, observer on: pso_nftsmo, "
+        "exact_nftsmo, nash_nftsmo, or SB3 model paths (.zip); 'none' to skip",
     )
     _add_common(reproduce)
     reproduce.set_defaults(func=_reproduce)

@@ -41,6 +41,7 @@ Metrics (:func:`summarise`), each per seed and then mean over seeds unless state
 from uav_formation_env.evaluation.metrics import (
     OBSERVER_WARMUP_S,
     formation_rmse,
+    nash_gap_summary,
     observer_rms,
     obstacle_events,
     summarise,
@@ -62,7 +63,12 @@ from uav_formation_env.evaluation.policies import (
     SB3Policy,
     make_policy,
 )
-from uav_formation_env.evaluation.runner import EpisodeBatch, ProgressLike, run_episodes
+from uav_formation_env.evaluation.runner import (
+    EpisodeBatch,
+    ProgressLike,
+    policy_plans,
+    run_episodes,
+)
 
 __all__ = [
     "DMPC_OPTIMIZERS",
@@ -79,8 +85,10 @@ __all__ = [
     "formation_rmse",
     "json_ready",
     "make_policy",
+    "nash_gap_summary",
     "observer_rms",
     "obstacle_events",
+    "policy_plans",
     "read_records",
     "run_episodes",
     "summarise",

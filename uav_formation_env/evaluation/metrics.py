@@ -118,6 +118,7 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
         "seconds_per_batch": batch.wall_seconds,
         "seconds_per_episode": batch.wall_seconds / batch.batch_size,
     }
+    summary["nash_gap"] = nash_gap_summary(batch)
     summary["optimiser_cost_ratio_median"] = None
     if batch.triggered is not None:
         counts = batch.triggered.sum(axis=0)  # (B, N)
@@ -128,3 +129,28 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
             ratio = batch.j_exec[batch.triggered] / batch.j_pre[batch.triggered]
             summary["optimiser_cost_ratio_median"] = float(np.median(ratio))
     return summary
+
+
+def nash_gap_summary(batch: EpisodeBatch) -> dict[str, Any] | None:
+    """Statistics of the per-step Nash gap (``run_episodes(nash_gap=True)``), else None.
+
+    Over the UAV-steps whose plan lies in the UAV's box (elsewhere the gap can be negative: see
+    :func:`~uav_formation_env.policies.nash.nash_gap`): median, 90th percentile, mean and max of
+    the gap, and of the gap relative to J_i of the plan; ``in_box_fraction`` of all UAV-steps.
+    """
+    if batch.nash_gap is None or batch.nash_cost is None or batch.nash_in_box is None:
+        return None
+    inside = batch.nash_in_box
+    gap = batch.nash_gap[inside]
+    relative = gap / np.maximum(batch.nash_cost[inside], 1e-12)
+    if gap.size == 0:
+        return {"in_box_fraction": 0.0}
+    return {
+        "median": float(np.median(gap)),
+        "p90": float(np.percentile(gap, 90)),
+        "mean": float(gap.mean()),
+        "max": float(gap.max()),
+        "relative_median": float(np.median(relative)),
+        "relative_p90": float(np.percentile(relative, 90)),
+        "in_box_fraction": float(inside.mean()),
+    }

@@ -13,7 +13,7 @@ from uav_formation_env.core.cost import relative_offset_sign
 from uav_formation_env.core.observation import decode_observations, others_index
 from uav_formation_env.policies.heuristic import ConsensusGains, consensus_pd
 
-DMPC_OPTIMIZERS = ("lfpio", "pio", "pso")
+DMPC_OPTIMIZERS = ("lfpio", "pio", "pso", "exact", "nash")
 POLICY_NAMES = (*DMPC_OPTIMIZERS, "heuristic", "random")
 SB3_ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")
 
@@ -149,7 +149,8 @@ def make_policy(
     name: str, scenario: Scenario, seed: int | None = 0, algo: str | None = None
 ) -> BatchPolicy:
     """A policy from a name: ``lfpio``, ``pio``, ``pso`` (the reference DMPC with that optimiser),
-    ``heuristic``, ``random``, or the path of a stable-baselines3 model.
+    ``exact`` (its best response solved exactly), ``nash`` (best responses iterated to a Nash
+    equilibrium every step), ``heuristic``, ``random``, or the path of a stable-baselines3 model.
 
     Args:
         name: policy name or model path.

@@ -11,9 +11,11 @@ from tqdm import tqdm
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import with_overrides
+from uav_formation_env.core.observation import decode_observations
 from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.envs.parallel import observations_of
 from uav_formation_env.evaluation.policies import BatchPolicy
+from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
 from uav_formation_env.sim import FormationSim
 
 
@@ -50,6 +52,10 @@ class EpisodeBatch:
     j_exec: np.ndarray | None  # (T, B, N)
     policy_seconds: np.ndarray  # (T,) wall time of act_batch per step [s]
     sim_seconds: np.ndarray  # (T,) wall time of the simulation step + observations [s]
+    # Nash gap of the policy's plans at each step (run_episodes(nash_gap=True)), else None
+    nash_gap: np.ndarray | None = None  # (T, B, N) J_i(plan) - min J_i, others' plans fixed
+    nash_cost: np.ndarray | None = None  # (T, B, N) J_i of the plan over the horizon
+    nash_in_box: np.ndarray | None = None  # (T, B, N) bool, the plan lies in the UAV's box
 
     @property
     def n_steps(self) -> int:
@@ -76,6 +82,7 @@ def run_episodes(
     policy_name: str = "",
     progress: ProgressLike = False,
     desc: str | None = None,
+    nash_gap: bool = False,
 ) -> EpisodeBatch:
     """Run one episode per seed, all seeds as one batch, with one ``act_batch`` call per step.
 
@@ -91,6 +98,10 @@ def run_episodes(
         progress: True for a tqdm bar over the steps, or a callable given the number of steps
             done since its last call.
         desc: label of the progress bar.
+        nash_gap: also measure, at every step, how far the policy's plans are from a Nash
+            equilibrium of the horizon game (:func:`policy_plans`,
+            :func:`~uav_formation_env.policies.nash.nash_gap`); not counted in the policy's
+            wall time.
     """
     if duration is not None:
         scenario = with_overrides(scenario, {"duration": float(duration)})
@@ -114,6 +125,7 @@ def run_episodes(
     steps: list[tuple] = []
     policy_seconds = np.zeros(n_steps)
     sim_seconds = np.zeros(n_steps)
+    gaps: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     sim_seconds_reset = time.perf_counter() - start
     bar = None
     callback = progress if callable(progress) else None
@@ -128,10 +140,14 @@ def run_episodes(
                 f"policy returned actions of shape {actions.shape}, "
                 f"expected {(batch, scenario.n_uav, 3)}"
             )
+        if nash_gap:
+            gap = measure_nash_gap(obs, scenario, policy_plans(policy, obs, actions, scenario))
+            gaps.append((gap.gap, gap.cost, gap.in_box))
+        t_sim = time.perf_counter()
         result = sim.step(np.clip(actions, -1.0, 1.0) * sim.u_max)
         obs = observations_of(sim, result)
         policy_seconds[k] = t1 - t0
-        sim_seconds[k] = time.perf_counter() - t1
+        sim_seconds[k] = time.perf_counter() - t_sim
         states.append(_state_record(result, centre_min))
         steps.append(
             (
@@ -158,6 +174,7 @@ def run_episodes(
             j_pre = np.asarray(records.j_pre, dtype=float)
             j_exec = np.asarray(records.j_exec, dtype=float)
     u_n, u_applied, disturbance, stage, terms, collision = zip(*steps)
+    gap_arrays = [np.stack(a) for a in zip(*gaps)] if gaps else [None, None, None]
     topo = sim.topology
     return EpisodeBatch(
         scenario=scenario,
@@ -185,7 +202,32 @@ def run_episodes(
         j_exec=j_exec,
         policy_seconds=policy_seconds,
         sim_seconds=sim_seconds,
+        nash_gap=gap_arrays[0],
+        nash_cost=gap_arrays[1],
+        nash_in_box=gap_arrays[2],
     )
+
+
+def policy_plans(
+    policy: BatchPolicy, obs: np.ndarray, actions: np.ndarray, scenario: Scenario
+) -> np.ndarray:
+    """Every UAV's input sequence over the horizon after ``policy`` acted on ``obs``.
+
+    A policy that broadcasts plans (the DMPC's ``plans``) gives them as they are. Any other
+    policy's plan is its action ``a · u_max`` held over the horizon, clipped to the UAV's box
+    ``|u_n| <= u_max - |estimate|`` (SPEC §1.5: the part of the actuator range the plant leaves
+    to the formation input while the observer compensates).
+
+    Returns:
+        (B, N, H, 3) [m/s^2].
+    """
+    plans = getattr(policy, "plans", None)
+    if isinstance(plans, np.ndarray) and plans.shape[:2] == actions.shape[:2]:
+        return plans
+    u_max, horizon = scenario.dynamics.u_max, scenario.cost.horizon
+    half_width = np.maximum(u_max - np.abs(decode_observations(obs, scenario.n_uav).estimate), 0)
+    held = np.clip(np.clip(actions, -1.0, 1.0) * u_max, -half_width, half_width)
+    return np.repeat(held[:, :, None, :], horizon, axis=2)
 
 
 def _state_record(result, centre_min) -> tuple[np.ndarray, ...]:

@@ -1,4 +1,4 @@
-"""Running the four variants (in parallel processes) and writing Table 2 and the summary."""
+"""Running the variants (in parallel processes) and writing the tables, summary and report."""
 
 from __future__ import annotations
 
@@ -24,12 +24,22 @@ from uav_formation_env.evaluation import (
     write_records,
 )
 from uav_formation_env.reproduce.figures import write_figures
+from uav_formation_env.reproduce.nash_analysis import (
+    NASH_FIGURE,
+    nash_report_lines,
+    nash_rows,
+    plot_nash_gap,
+    write_nash_table,
+)
 from uav_formation_env.reproduce.report import build_report
 from uav_formation_env.reproduce.tables import build_summary, write_table2
 from uav_formation_env.reproduce.variants import (
+    GAME_VARIANTS,
+    LABELS,
     VARIANTS,
     run_variant,
     variant_scenario,
+    variant_spec,
 )
 
 
@@ -61,6 +71,7 @@ def reproduce(
     records: bool = False,
     policy_seed: int | None = None,
     variants: Sequence[str] = tuple(VARIANTS),
+    game_variants: Sequence[str] = tuple(GAME_VARIANTS),
 ) -> Reproduction:
     """Fly the four variants on the same seeds and write the tables, figures and report.
 
@@ -75,6 +86,10 @@ def reproduce(
         records: also write per-step CSVs per variant.
         policy_seed: seed of the DMPC optimisers' generator (None: the first episode seed).
         variants: subset of :data:`VARIANTS` to run (all four for the report's comparison).
+        game_variants: further solvers of the game for the Nash-gap comparison (observer on):
+            names of :data:`GAME_VARIANTS` or paths of stable-baselines3 models; empty to skip.
+            Every variant's Nash gap is measured at every step (``nash_gap.csv``,
+            ``fig10_nash_gap.png``, a section of ``REPORT.md``).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -85,24 +100,36 @@ def reproduce(
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown variant(s) {unknown}; expected some of {list(VARIANTS)}")
+    game_variants = [v for v in game_variants if v not in variants]
+    for v in game_variants:
+        variant_spec(v)  # raises for an unknown name or a missing model
     if policy_seed is None:
         policy_seed = seeds[0]
     if int(jobs) <= 0:
         jobs = available_cpus()
-    jobs = max(1, min(int(jobs), len(variants)))
+    everything = [*variants, *game_variants]
+    jobs = max(1, min(int(jobs), len(everything)))
     start = time.perf_counter()
-    batches = _run_all(list(variants), base, seeds, duration, policy_seed, jobs, progress)
+    batches = _run_all(everything, base, seeds, duration, policy_seed, jobs, progress)
     wall = time.perf_counter() - start
+    all_batches = {v: batches[v] for v in everything}
     batches = {v: batches[v] for v in variants}
 
-    summary = json_ready(build_summary(batches, seeds, wall, jobs))
+    summary = build_summary(batches, seeds, wall, jobs)
+    nash = nash_rows(all_batches)
+    summary["nash_gap"] = {row["variant"]: row for row in nash}
+    summary = json_ready(summary)
     write_table2(batches, out / "table2.csv")
+    write_nash_table(nash, out / "nash_gap.csv")
     write_json(summary, out / "summary.json")
     write_figures(batches, out)
-    (out / "REPORT.md").write_text(build_report(batches, summary))
+    plot_nash_gap(all_batches, out / NASH_FIGURE)
+    report = build_report(batches, summary) + "\n" + "\n".join(nash_report_lines(nash))
+    (out / "REPORT.md").write_text(report)
     if records:
-        for variant, batch in batches.items():
-            write_records(batch, out / f"records_{variant}.csv")
+        for variant, batch in all_batches.items():
+            name = variant if variant in LABELS else Path(variant).parent.name or "model"
+            write_records(batch, out / f"records_{name}.csv")
     return Reproduction(batches, summary, out)
 
 
@@ -118,7 +145,7 @@ def _run_all(
     if jobs == 1:
         return {v: run_variant(v, base, seeds, duration, policy_seed, progress) for v in variants}
     # slowest first (LFPIO spends about twice PIO's evaluations)
-    order = sorted(variants, key=lambda v: VARIANTS[v][0] != "lfpio")
+    order = sorted(variants, key=lambda v: variant_spec(v)[0] not in ("lfpio", "nash"))
     n_steps = variant_scenario(base, variants[0], duration).n_steps
     context = multiprocessing.get_context("spawn")
     with context.Manager() as manager:

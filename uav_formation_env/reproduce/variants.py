@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from uav_formation_env.config import Scenario
@@ -20,11 +21,21 @@ VARIANTS: dict[str, tuple[str, bool]] = {
     "pio_nftsmo": ("pio", True),
     "lfpio_nftsmo": ("lfpio", True),
 }
+# More solvers of the same game for the Nash-gap comparison (observer on). Besides these names a
+# game variant can be the path of a stable-baselines3 model (its action held over the horizon).
+GAME_VARIANTS: dict[str, tuple[str, bool]] = {
+    "pso_nftsmo": ("pso", True),
+    "exact_nftsmo": ("exact", True),
+    "nash_nftsmo": ("nash", True),
+}
 LABELS = {
     "pio": "PIO",
     "lfpio": "LFPIO",
     "pio_nftsmo": "PIO + NFTSMO",
     "lfpio_nftsmo": "LFPIO + NFTSMO",
+    "pso_nftsmo": "PSO + NFTSMO",
+    "exact_nftsmo": "exact best response + NFTSMO",
+    "nash_nftsmo": "iterated best response (Nash) + NFTSMO",
 }
 # Table 2 of the paper (one run, 1000 steps)
 PAPER_TRIGGERS: dict[str, tuple[float, ...]] = {
@@ -48,9 +59,31 @@ FIGURES = (
 )
 
 
+def variant_spec(variant: str) -> tuple[str, bool]:
+    """``(policy name or model path, observer on)`` of a paper or game variant."""
+    if variant in VARIANTS:
+        return VARIANTS[variant]
+    if variant in GAME_VARIANTS:
+        return GAME_VARIANTS[variant]
+    path = Path(variant)
+    if path.is_file() or path.with_suffix(".zip").is_file():
+        return variant, True
+    raise ValueError(
+        f"unknown variant {variant!r}: expected one of {list(VARIANTS) + list(GAME_VARIANTS)} "
+        "or the path of a stable-baselines3 model"
+    )
+
+
+def variant_label(variant: str) -> str:
+    """Display name of a variant (a model's directory name, upper case, + NFTSMO)."""
+    if variant in LABELS:
+        return LABELS[variant]
+    return f"{Path(variant).parent.name.upper() or Path(variant).stem} + NFTSMO"
+
+
 def variant_scenario(base: Scenario, variant: str, duration: float | None = None) -> Scenario:
     """The scenario of a variant: ``base`` with the observer on or off (and the duration)."""
-    overrides: dict[str, Any] = {"observer.enabled": VARIANTS[variant][1]}
+    overrides: dict[str, Any] = {"observer.enabled": variant_spec(variant)[1]}
     if duration is not None:
         overrides["duration"] = float(duration)
     return with_overrides(base, overrides)
@@ -64,9 +97,15 @@ def run_variant(
     policy_seed: int = 0,
     progress: Any = False,
 ) -> EpisodeBatch:
-    """All seeds of one variant as one batch (see the module docstring)."""
+    """All seeds of one variant as one batch, with the Nash gap of its plans at every step."""
     scenario = variant_scenario(base, variant, duration)
-    policy = make_policy(VARIANTS[variant][0], scenario, seed=policy_seed)
+    policy = make_policy(variant_spec(variant)[0], scenario, seed=policy_seed)
     return run_episodes(
-        scenario, policy, seeds, policy_name=variant, progress=progress, desc=LABELS[variant]
+        scenario,
+        policy,
+        seeds,
+        policy_name=variant,
+        progress=progress,
+        desc=variant_label(variant),
+        nash_gap=True,
     )
