@@ -207,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument(
         "--policy",
         default="lfpio",
-        help="lfpio, pio, pso (reference DMPC), heuristic, random, or a stable-baselines3 "
+        help="lfpio, pio, pso, exact, nash (reference DMPC), heuristic, random, or a SB3 "
         "model path (.zip; a vecnormalize.pkl beside it is applied)",
     )
     evaluate.add_argument("--algo", default=None, help="SB3 algorithm of a model (default: try)")
