@@ -8,12 +8,16 @@
 * The SB3 VecEnv at B = 1024 and 4096 copies: env-steps/s = copies x steps per second (each copy
   is N = 5 VecEnv entries), auto-resets included.
 
-    python benchmarks/bench_env.py [--seconds 3] [--batches 1024 4096]
+    python benchmarks/bench_env.py [--seconds 3] [--repeats 1] [--batches 1024 4096]
+
+On a shared, noisy machine use ``--repeats 3`` (or more): ours and mpe2 are then measured
+alternately that many times and the median of the per-round ratios is printed as well.
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 from collections.abc import Callable
 
@@ -74,20 +78,30 @@ def vec_rate(batch: int, seconds: float) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--repeats", type=int, default=1, help="alternating rounds of ours/mpe2")
     parser.add_argument("--batches", type=int, nargs="+", default=[1024, 4096])
     args = parser.parse_args()
 
     print("ParallelEnv, random actions, N = 5 (env-steps/s, resets included)")
-    on = ours_rate(observer=True, seconds=args.seconds)
+    ons, mpes = [], []
+    for _ in range(max(1, args.repeats)):
+        ons.append(ours_rate(observer=True, seconds=args.seconds))
+        mpes.append(mpe2_rate(args.seconds))
+    on = statistics.median(ons)
     off = ours_rate(observer=False, seconds=args.seconds)
     print(f"  uav_formation_v0 paper, observer on : {on:>10,.0f}")
     print(f"  uav_formation_v0 paper, observer off: {off:>10,.0f}  (for information)")
-    mpe = mpe2_rate(args.seconds)
-    if mpe is None:
+    if mpes[0] is None:
         print("  mpe2 simple_spread_v3: skipped (mpe2 is not importable)")
     else:
+        mpe = statistics.median(mpes)
         print(f"  mpe2 simple_spread_v3 (continuous) : {mpe:>10,.0f}")
         print(f"  ratio ours (observer on) / mpe2    : {on / mpe:>10.3f}")
+        if len(ons) > 1:
+            ratios = [a / b for a, b in zip(ons, mpes)]
+            spread = ", ".join(f"{r:.2f}" for r in ratios)
+            median = statistics.median(ratios)
+            print(f"  median of per-round ratios         : {median:>10.3f}  ({spread})")
 
     print("SB3 VecEnv, paper scenario, observer on, random actions")
     print(f"  {'B':>6} {'env-steps/s':>13} {'agent-steps/s':>14}")

@@ -26,6 +26,7 @@ import numpy as np
 from uav_formation_env.config import Scenario
 from uav_formation_env.core import topology
 from uav_formation_env.core.cost import CostTerms, stage_cost
+from uav_formation_env.core.cost.stage import pair_distances
 from uav_formation_env.core.disturbances import Disturbance
 from uav_formation_env.core.dynamics import zoh_step
 from uav_formation_env.core.observer import (
@@ -113,6 +114,8 @@ class FormationSim:
         ).reshape(-1, 2)
         self.obstacle_radii = np.array([o.radius for o in scenario.avoidance.obstacles])
         self.disturbance = Disturbance(scenario.disturbance, self.n_uav, self.dt)
+        self._rows = np.arange(self.batch_size)
+        self._n_steps = scenario.n_steps
         self._rngs: list[np.random.Generator] = []
         self.last: StepResult | None = None
 
@@ -168,6 +171,7 @@ class FormationSim:
             self.gust[b] = self.disturbance.initial_gust(rng)
             self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)
         self.noise_pos[mask] = 0
+        self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
         self.t[mask] = 0.0
         self.steps[mask] = 0
         self.observer = _where_batch(mask, observer_init(self.z[..., 3:]), self.observer)
@@ -198,10 +202,12 @@ class FormationSim:
         if not np.isfinite(u_n).all():
             raise ValueError("u_n contains NaN or infinite values")
         obs_cfg = self.scenario.observer
-        u_n = np.clip(u_n, -self.u_max, self.u_max)
+        # np.minimum(np.maximum(.)) is np.clip for finite values, without its Python wrappers
+        u_max = self.u_max
+        u_n = np.minimum(np.maximum(u_n, -u_max), u_max)
         u_d = compensation(self.observer, obs_cfg) if obs_cfg.enabled else np.zeros_like(u_n)
-        u = np.clip(u_n + u_d, -self.u_max, self.u_max)
-        noise = self.noise[np.arange(self.batch_size), self.noise_pos]
+        u = np.minimum(np.maximum(u_n + u_d, -u_max), u_max)
+        noise = self.noise[self._rows, self.noise_pos]
         d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust)
         a = u + d
         if obs_cfg.enabled:
@@ -212,20 +218,30 @@ class FormationSim:
         self.steps += 1
         self.t = self.steps * self.dt  # no drift from repeated addition
         self._advance_noise()
-        result = self._finish(np.ones(self.batch_size, dtype=bool), u_n, u_d, u, d)
+        result = self._finish(None, u_n, u_d, u, d)
         self.last = result
         return result
 
     def _advance_noise(self) -> None:
         self.noise_pos += 1
-        for b in np.flatnonzero(self.noise_pos >= NOISE_BLOCK):
-            self.noise[b] = self.disturbance.draw_noise(self._rngs[b], NOISE_BLOCK)
-            self.noise_pos[b] = 0
+        # steps until the most advanced copy runs out of noise: no array reduction per step
+        self._noise_left -= 1
+        if self._noise_left <= 0:
+            for b in np.flatnonzero(self.noise_pos >= NOISE_BLOCK):
+                self.noise[b] = self.disturbance.draw_noise(self._rngs[b], NOISE_BLOCK)
+                self.noise_pos[b] = 0
+            self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
 
     def _finish(
-        self, mask: np.ndarray, u_n: np.ndarray, u_d: np.ndarray, u: np.ndarray, d: np.ndarray
+        self,
+        mask: np.ndarray | None,
+        u_n: np.ndarray,
+        u_d: np.ndarray,
+        u: np.ndarray,
+        d: np.ndarray,
     ) -> StepResult:
-        """Topology update at the current time (only in ``mask`` copies), costs and distances."""
+        """Topology update at the current time (only in ``mask`` copies; None: all), costs and
+        distances."""
         cfg = self.scenario
         new_topology, out = topology.update_topology(
             self.topology,
@@ -237,8 +253,12 @@ class FormationSim:
             self.base_adjacency,
         )
         self.topology = (
-            new_topology if mask.all() else _where_batch(mask, new_topology, self.topology)
+            new_topology
+            if mask is None or mask.all()
+            else _where_batch(mask, new_topology, self.topology)
         )
+        # one pairwise-distance matrix for the separation term and the nearest-UAV distance
+        pair = pair_distances(self.z[..., :3])
         cost = stage_cost(
             self.z,
             u_n,
@@ -247,8 +267,9 @@ class FormationSim:
             self.offsets,
             cfg.cost,
             cfg.formation.mirrored_offsets,
+            pair_distance=pair,
         )
-        separation, obstacle_distance = self.distances()
+        separation, obstacle_distance = self.distances(pair)
         collision = (separation < cfg.collision.uav_distance) | (obstacle_distance < 0.0)
         estimate = (
             disturbance_estimate(self.observer, cfg.observer)
@@ -269,7 +290,7 @@ class FormationSim:
             cost=cost,
             t=self.t.copy(),
             step=self.steps.copy(),
-            truncated=self.steps >= cfg.n_steps,
+            truncated=self.steps >= self._n_steps,
             min_separation=separation,
             obstacle_distance=obstacle_distance,
             collision=collision,
@@ -278,21 +299,24 @@ class FormationSim:
         )
 
     # ------------------------------------------------------------------ queries
-    def distances(self) -> tuple[np.ndarray, np.ndarray]:
+    def distances(self, pair: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Nearest-UAV distance and nearest obstacle-surface distance, each (B, N) [m].
 
         The obstacle distance is +inf without obstacles and negative inside an obstacle.
+
+        Args:
+            pair: (B, N, N) :func:`~uav_formation_env.core.cost.stage.pair_distances` of the
+                current positions, if already computed.
         """
         p = self.z[..., :3]
-        diff = p[:, :, None, :] - p[:, None, :, :]
-        sep = np.sqrt(np.einsum("bijk,bijk->bij", diff, diff))
-        sep[:, np.arange(self.n_uav), np.arange(self.n_uav)] = np.inf
+        if pair is None:
+            pair = pair_distances(p)
         if len(self.obstacle_radii) == 0:
             surface = np.full(p.shape[:2], np.inf)
         else:
             centre = topology.obstacle_distances(p, self.scenario.avoidance)
-            surface = (centre - self.obstacle_radii).min(axis=-1)
-        return sep.min(axis=-1), surface
+            surface = np.minimum.reduce(centre - self.obstacle_radii, axis=-1)
+        return np.minimum.reduce(pair, axis=-1), surface
 
     def reference_preview(self) -> np.ndarray:
         """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held)."""

@@ -17,9 +17,20 @@ single simulation seeded alike, bit for bit.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from uav_formation_env.config import DisturbanceConfig
+
+
+@lru_cache(maxsize=32)
+def _signed_amplitude(n_uav: int, amplitude: float) -> np.ndarray:
+    """(N, 1) ``A (-1)^i`` (i 1-based) of eq. 21 [m/s^2], cached and read-only."""
+    sign = np.where(np.arange(1, n_uav + 1) % 2 == 1, -1.0, 1.0)
+    signed = amplitude * sign[:, None]
+    signed.flags.writeable = False
+    return signed
 
 
 def paper_sinusoid(t: np.ndarray, n_uav: int, amplitude: float, period: float) -> np.ndarray:
@@ -35,9 +46,13 @@ def paper_sinusoid(t: np.ndarray, n_uav: int, amplitude: float, period: float) -
         (B, N, 3) [m/s^2]; odd paper UAVs (1, 3, 5) get the negative sign.
     """
     phase = 2.0 * np.pi * np.asarray(t, dtype=float) / period
-    wave = np.stack((np.sin(phase), np.cos(phase), np.sin(phase)), axis=-1)  # (B, 3)
-    sign = np.where(np.arange(1, n_uav + 1) % 2 == 1, -1.0, 1.0)  # (-1)^i, i 1-based
-    return amplitude * sign[:, None] * wave[..., None, :]
+    sine = np.sin(phase)
+    # [sin, cos, sin] by assignment into one array: np.stack costs more than the trigonometry
+    wave = np.empty((*phase.shape, 3))  # (B, 3)
+    wave[..., 0] = sine
+    wave[..., 1] = np.cos(phase)
+    wave[..., 2] = sine
+    return _signed_amplitude(n_uav, amplitude) * wave[..., None, :]
 
 
 class Disturbance:
@@ -57,6 +72,7 @@ class Disturbance:
         self.uniform_dim = (1 if config.scalar_rand else 3) if uses_paper else 0
         self.gust_dim = 3 if config.gust_std > 0 else 0
         self.gust_decay = float(np.exp(-dt / config.gust_time_constant))
+        self._innovation_scale = config.gust_std * np.sqrt(1.0 - self.gust_decay**2)
         self._wind = np.asarray(config.wind, dtype=float)
 
     @property
@@ -95,14 +111,13 @@ class Disturbance:
             ``(d, gust_next)``, each (B, N, 3) [m/s^2].
         """
         cfg = self.config
-        d = np.broadcast_to(self._wind, gust.shape) + gust
+        d = self._wind + gust  # a new array, so the sums below may run in place
         if cfg.model == "paper":
-            d = d + paper_sinusoid(t, self.n_uav, cfg.amplitude, cfg.period)
+            d += paper_sinusoid(t, self.n_uav, cfg.amplitude, cfg.period)
             if self.uniform_dim:
-                d = d + cfg.noise_scale * noise[..., : self.uniform_dim]
+                d += cfg.noise_scale * noise[..., : self.uniform_dim]
         if self.gust_dim:
-            xi = noise[..., self.uniform_dim :]
-            innovation = cfg.gust_std * np.sqrt(1.0 - self.gust_decay**2) * xi
+            innovation = self._innovation_scale * noise[..., self.uniform_dim :]
             gust = self.gust_decay * gust + innovation
         return d, gust
 

@@ -46,7 +46,11 @@ def zoh_step(z: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         (..., 6) next state.
     """
     dp, dv = zoh_increments(z[..., 3:], a, dt)
-    return np.concatenate((z[..., :3] + dp, z[..., 3:] + dv), axis=-1)
+    # dp already has the broadcast shape and dtype of z and a
+    out = np.empty((*dp.shape[:-1], 6), dtype=dp.dtype)
+    np.add(z[..., :3], dp, out=out[..., :3])
+    np.add(z[..., 3:], dv, out=out[..., 3:])
+    return out
 
 
 def rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndarray:

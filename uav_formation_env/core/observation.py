@@ -27,6 +27,7 @@ whether UAV i receives messages from it (and so whether it enters J_i).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -47,10 +48,51 @@ def observation_dim(n_uav: int) -> int:
     return OWN_DIM + OTHER_DIM * (n_uav - 1)
 
 
+@lru_cache(maxsize=16)
 def others_index(n_uav: int) -> np.ndarray:
-    """(N, N-1) index of the k-th other UAV of each UAV (ascending, skipping itself)."""
+    """(N, N-1) index of the k-th other UAV of each UAV (ascending, skipping itself).
+
+    Cached per N and read-only.
+    """
     full = np.broadcast_to(np.arange(n_uav), (n_uav, n_uav))
-    return full[~np.eye(n_uav, dtype=bool)].reshape(n_uav, n_uav - 1)
+    index = full[~np.eye(n_uav, dtype=bool)].reshape(n_uav, n_uav - 1)
+    index.flags.writeable = False
+    return index
+
+
+@lru_cache(maxsize=16)
+def _layout(n_uav: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per-slot constants of the layout for N UAVs, cached and read-only.
+
+    Returns:
+        ``(scale, low, high, pairs)``: scale (dim,) is each slot's divisor (1 for the unscaled
+        slots); low and high (dim,) are each slot's clip bounds (±DISTANCE_CLIP for the clipped
+        distances, else ±OBSERVATION_BOUND); pairs (N, N-1) is the flat index i·N + j of h_ij of
+        the k-th other UAV j of UAV i in a row-major (N, N) matrix.
+    """
+    dim = observation_dim(n_uav)
+    scale = np.ones(dim)
+    scale[0:9] = VELOCITY_SCALE
+    scale[9:12] = ESTIMATE_SCALE
+    scale[[14, 15, 16, 18]] = DISTANCE_SCALE
+    other = scale[OWN_DIM:].reshape(n_uav - 1, OTHER_DIM)
+    other[:, 1:4] = FORMATION_SCALE
+    other[:, 4:7] = VELOCITY_SCALE
+    high = np.full(dim, OBSERVATION_BOUND)
+    high[[14, 15, 16, 18]] = DISTANCE_CLIP
+    low = -high
+    pairs = np.arange(n_uav)[:, None] * n_uav + others_index(n_uav)
+    for array in (scale, low, high, pairs):
+        array.flags.writeable = False
+    return scale, low, high, pairs
+
+
+@lru_cache(maxsize=16)
+def _arange(count: int, step: int) -> np.ndarray:
+    """``np.arange(count) * step``, cached and read-only."""
+    index = np.arange(count) * step
+    index.flags.writeable = False
+    return index
 
 
 def build_observations(
@@ -85,35 +127,40 @@ def build_observations(
         (B, N, dim) float32.
     """
     batch, n_uav = z.shape[:2]
+    scale, low, high, pairs = _layout(n_uav)
+    # Raw (unscaled) values go into one array, then one division by each slot's scale and one
+    # clip to each slot's bounds: x / 1 is exact and clip(±10) then clip(±100) is clip(±10), so
+    # every value is the one of scaling and clipping slot by slot, for a fraction of the calls.
+    raw = np.empty((batch, n_uav, observation_dim(n_uav)))
     v = z[..., 3:]
-    own = np.zeros((batch, n_uav, OWN_DIM))
-    own[..., 0:3] = v / VELOCITY_SCALE
-    own[..., 3:6] = (v - reference_velocity) / VELOCITY_SCALE
-    own[..., 6:9] = reference_velocity / VELOCITY_SCALE
-    own[..., 9:12] = estimate / ESTIMATE_SCALE
-    own[..., 12] = time_fraction[:, None]
-    own[..., 13] = avoiding
-    if len(obstacle_radii):
+    raw[..., 0:3] = v
+    np.subtract(v, reference_velocity, out=raw[..., 3:6])
+    raw[..., 6:9] = reference_velocity
+    raw[..., 9:12] = estimate
+    raw[..., 12] = time_fraction[:, None]
+    raw[..., 13] = avoiding
+    n_obs = len(obstacle_radii)
+    if n_obs:
         rel = obstacle_centers[None, None] - z[:, :, None, :2]  # (B, N, O, 2)
         centre_dist = np.sqrt(np.einsum("bnok,bnok->bno", rel, rel))
-        nearest = (centre_dist - obstacle_radii).argmin(axis=-1)  # (B, N)
-        rows, cols = np.indices(nearest.shape)
-        pick = rel[rows, cols, nearest]  # (B, N, 2)
-        surface = centre_dist[rows, cols, nearest] - obstacle_radii[nearest]
-        own[..., 14:16] = np.clip(pick / DISTANCE_SCALE, -DISTANCE_CLIP, DISTANCE_CLIP)
-        own[..., 16] = np.clip(surface / DISTANCE_SCALE, -DISTANCE_CLIP, DISTANCE_CLIP)
-        own[..., 17] = 1.0
-    own[..., 18] = np.clip(min_separation / DISTANCE_SCALE, -DISTANCE_CLIP, DISTANCE_CLIP)
+        surface = centre_dist - obstacle_radii  # (B, N, O)
+        # flat index of each UAV's nearest obstacle in the (B·N·O,) flattening
+        nearest = _arange(batch * n_uav, n_obs) + surface.argmin(axis=-1).ravel()
+        raw[..., 14:16] = rel.reshape(-1, 2).take(nearest, axis=0).reshape(batch, n_uav, 2)
+        raw[..., 16] = surface.take(nearest).reshape(batch, n_uav)
+        raw[..., 17] = 1.0
+    else:
+        raw[..., 14:18] = 0.0
+    raw[..., 18] = min_separation
 
     a = anchored(z, offsets, mirrored)  # (B, N, 6)
-    index = others_index(n_uav)  # (N, N-1)
-    relative = a[:, index] - a[:, :, None]  # (B, N, N-1, 6)
-    other = np.empty((batch, n_uav, n_uav - 1, OTHER_DIM))
-    other[..., 0] = adjacency[:, np.arange(n_uav)[:, None], index]
-    other[..., 1:4] = relative[..., :3] / FORMATION_SCALE
-    other[..., 4:7] = relative[..., 3:] / VELOCITY_SCALE
-    flat = np.concatenate((own, other.reshape(batch, n_uav, -1)), axis=-1)
-    return np.clip(flat, -OBSERVATION_BOUND, OBSERVATION_BOUND).astype(np.float32)
+    other = raw[..., OWN_DIM:].reshape(batch, n_uav, n_uav - 1, OTHER_DIM)  # a view
+    other[..., 0] = adjacency.reshape(batch, n_uav * n_uav).take(pairs, axis=1)
+    np.subtract(a.take(others_index(n_uav), axis=1), a[:, :, None], out=other[..., 1:7])
+    raw /= scale
+    np.maximum(raw, low, out=raw)
+    np.minimum(raw, high, out=raw)
+    return raw.astype(np.float32)
 
 
 @dataclass(frozen=True)

@@ -19,10 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 from uav_formation_env.config import AvoidanceConfig
+from uav_formation_env.core.reference import config_cache
 
 __all__ = [
     "choose_sides",
     "deflection_demand",
+    "detection_sq",
     "heading_frame",
     "in_range",
     "obstacle_arrays",
@@ -34,20 +36,33 @@ __all__ = [
 _EPS = 1e-9  # lengths / speeds below this count as zero [m], [m/s]
 
 
+@config_cache
 def obstacle_arrays(avoidance: AvoidanceConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Obstacle centres and radii as arrays.
+    """Obstacle centres and radii as arrays, cached per (frozen, hashable) configuration.
 
     Args:
         avoidance: the avoidance configuration.
 
     Returns:
         centres (O, 2) [m], safety radii R_s = radius + safety_margin (O,) [m] and detection radii
-        d^o = radius + detection_margin (O,) [m], both measured from the centre.
+        d^o = radius + detection_margin (O,) [m], both measured from the centre. The arrays are
+        shared between calls and read-only.
     """
     n = len(avoidance.obstacles)
     centres = np.array([ob.center for ob in avoidance.obstacles], dtype=float).reshape(n, 2)
     radii = np.array([ob.radius for ob in avoidance.obstacles], dtype=float).reshape(n)
-    return centres, radii + avoidance.safety_margin, radii + avoidance.detection_margin
+    arrays = (centres, radii + avoidance.safety_margin, radii + avoidance.detection_margin)
+    for array in arrays:
+        array.flags.writeable = False
+    return arrays
+
+
+@config_cache
+def detection_sq(avoidance: AvoidanceConfig) -> np.ndarray:
+    """(O,) squared detection radii (d^o)² [m²], cached and read-only."""
+    squared = obstacle_arrays(avoidance)[2] ** 2
+    squared.flags.writeable = False
+    return squared
 
 
 def heading_frame(velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,9 +77,12 @@ def heading_frame(velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         horizontal direction of travel).
     """
     horizontal = np.asarray(velocity, dtype=float)[..., :2]
-    speed = np.linalg.norm(horizontal, axis=-1, keepdims=True)
+    # np.linalg.norm(axis=-1) of real values, without its Python layer
+    speed = np.sqrt(np.add.reduce(horizontal * horizontal, axis=-1, keepdims=True))
     e_hat = np.where(speed > _EPS, horizontal / np.maximum(speed, _EPS), 0.0)
-    n_hat = np.stack([-e_hat[..., 1], e_hat[..., 0]], axis=-1)
+    n_hat = np.empty_like(e_hat)
+    np.negative(e_hat[..., 1], out=n_hat[..., 0])
+    n_hat[..., 1] = e_hat[..., 0]
     return e_hat, n_hat
 
 
@@ -151,7 +169,7 @@ def tangent_direction(
     out_x = sa * ry - ca * rx
     out_y = -sa * rx - ca * ry
     # inside: Rot(-s 90°) r̂ = s (r_y, -r_x), plus the outward radial term
-    push = np.clip((safety_radius - dist) / safety_radius, 0.0, 1.0)
+    push = np.minimum(np.maximum((safety_radius - dist) / safety_radius, 0.0), 1.0)  # np.clip
     in_x = s * ry + push * rx
     in_y = push * ry - s * rx
     outside = dist > safety_radius
@@ -173,8 +191,8 @@ def obstacle_distances(positions: np.ndarray, avoidance: AvoidanceConfig) -> np.
     """
     centres, _, _ = obstacle_arrays(avoidance)
     positions = np.asarray(positions, dtype=float)
-    rel = positions[..., :, None, :2] - centres
-    return np.sqrt(rel[..., 0] ** 2 + rel[..., 1] ** 2)
+    rel_sq = np.square(positions[..., :, None, :2] - centres)
+    return np.sqrt(rel_sq[..., 0] + rel_sq[..., 1])
 
 
 def choose_sides(lat: np.ndarray, deadband: float) -> tuple[np.ndarray, np.ndarray]:

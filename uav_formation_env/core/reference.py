@@ -5,13 +5,60 @@ See SPEC §4.3 for the preview: the schedule at t + kδ, or the current referenc
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import lru_cache, wraps
+from typing import TypeVar
+
 import numpy as np
 
 from uav_formation_env.config import ScheduleConfig
 
-__all__ = ["preset_velocity", "reference_preview"]
+__all__ = ["config_cache", "preset_velocity", "reference_preview", "schedule_arrays"]
 
 _TIME_TOL = 1e-9  # tolerance of the schedule's "t <= times[k]" [s]
+
+
+_Config = TypeVar("_Config")
+_Value = TypeVar("_Value")
+
+
+def config_cache(function: Callable[[_Config], _Value]) -> Callable[[_Config], _Value]:
+    """Memoise a function of one frozen (hashable) configuration.
+
+    ``functools.lru_cache`` alone rehashes every field of a frozen dataclass on each call, which
+    for nested configurations costs more than the arrays it saves; so calls are first looked up
+    by the configuration's identity (the entry holds the configuration, so its id is not reused),
+    then by value. Cached results are shared: return read-only arrays.
+    """
+    by_value = lru_cache(maxsize=16)(function)
+    by_id: dict[int, tuple[_Config, _Value]] = {}
+
+    @wraps(function)
+    def cached(config: _Config) -> _Value:
+        hit = by_id.get(id(config))
+        if hit is not None and hit[0] is config:
+            return hit[1]
+        value = by_value(config)
+        if len(by_id) >= 64:
+            by_id.clear()
+        by_id[id(config)] = (config, value)
+        return value
+
+    return cached
+
+
+@config_cache
+def schedule_arrays(schedule: ScheduleConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Switching times (K,) [s] and velocities (K+1, 3) [m/s] of a schedule, cached, read-only.
+
+    The preset velocity is looked up every control step; converting the config's tuples each
+    time cost more than the lookup itself.
+    """
+    times = np.asarray(schedule.times, dtype=float)
+    velocities = np.asarray(schedule.velocities, dtype=float).reshape(-1, 3)
+    times.flags.writeable = False
+    velocities.flags.writeable = False
+    return times, velocities
 
 
 def preset_velocity(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
@@ -27,10 +74,9 @@ def preset_velocity(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
     Returns:
         (..., 3) velocity [m/s].
     """
-    times = np.asarray(schedule.times, dtype=float)
-    velocities = np.asarray(schedule.velocities, dtype=float).reshape(-1, 3)
-    index = np.searchsorted(times, np.asarray(t, dtype=float) - _TIME_TOL, side="left")
-    return velocities[index]
+    times, velocities = schedule_arrays(schedule)
+    index = times.searchsorted(np.asarray(t, dtype=float) - _TIME_TOL, side="left")
+    return velocities.take(index, axis=0)  # a new array even for scalar t
 
 
 def reference_preview(

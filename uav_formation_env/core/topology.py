@@ -66,6 +66,7 @@ from uav_formation_env.config import AvoidanceConfig, ScheduleConfig
 from uav_formation_env.core.obstacles import (
     choose_sides,
     deflection_demand,
+    detection_sq,
     heading_frame,
     in_range,
     obstacle_arrays,
@@ -183,14 +184,20 @@ def reset_topology(state: TopologyState, mask: np.ndarray) -> TopologyState:
 
 
 def _copy_state(state: TopologyState) -> TopologyState:
-    return TopologyState(
-        **{name: getattr(state, name).copy() for name in TopologyState.__dataclass_fields__}
-    )
+    return TopologyState(*(getattr(state, name).copy() for name in _STATE_FIELDS))
+
+
+_STATE_FIELDS = tuple(TopologyState.__dataclass_fields__)
 
 
 def _batch_last(x: np.ndarray) -> np.ndarray:
     """(B, ...) -> a contiguous copy laid out (..., B)."""
-    return np.moveaxis(x, 0, -1).copy()
+    return x.transpose((*range(1, x.ndim), 0)).copy()  # np.moveaxis(x, 0, -1), cheaper
+
+
+def _batch_first(x: np.ndarray) -> np.ndarray:
+    """(..., B) -> a (B, ...) view."""
+    return x.transpose((x.ndim - 1, *range(x.ndim - 1)))  # np.moveaxis(x, -1, 0), cheaper
 
 
 def update_topology(
@@ -231,7 +238,9 @@ def update_topology(
         )
     if n_obs != len(avoidance.obstacles):
         raise ValueError(f"state has {n_obs} obstacles, config has {len(avoidance.obstacles)}")
-    t = np.broadcast_to(np.asarray(t, dtype=float), (batch,))
+    t = np.asarray(t, dtype=float)
+    if t.shape != (batch,):
+        t = np.broadcast_to(t, (batch,))
     h0 = np.asarray(base_adjacency, dtype=float)
     preset = preset_velocity(schedule, t)  # (B, 3)
     if n_obs == 0:
@@ -241,8 +250,8 @@ def update_topology(
     if not (state.status == ACTIVE).any():
         # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
         # detection radius, so nothing can activate (activation needs min_i D_i < d^o).
-        rel = positions[:, :, None, :2] - centres  # (B, N, O, 2)
-        near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect**2) & (state.status == IDLE)
+        rel, r_detect_sq = positions[:, :, None, :2] - centres, detection_sq(avoidance)
+        near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect_sq) & (state.status == IDLE)
         if not near_idle.any():
             return _copy_state(state), _idle_output(preset, h0, batch, n_uav, n_obs)
     e_hat, _ = heading_frame(preset)
@@ -290,9 +299,9 @@ def update_topology(
 
     new_state = TopologyState(
         status=status.T,
-        side=np.moveaxis(side, -1, 0),
-        guide=np.moveaxis(guide, -1, 0),
-        ended=np.moveaxis(ended, -1, 0),
+        side=_batch_first(side),
+        guide=_batch_first(guide),
+        ended=_batch_first(ended),
         case=case.T,
         activation_time=activation_time.T,
         restore_time=restore_time.T,
@@ -313,15 +322,19 @@ def _idle_output(
     preset: np.ndarray, h0: np.ndarray, batch: int, n_uav: int, n_obs: int
 ) -> TopologyOutput:
     """Outputs with no active obstacle: H0, one group, schedule references."""
-    no_event = np.zeros((batch, n_obs), dtype=bool)
+    # fresh arrays filled by assignment (np.broadcast_to(...).copy(), np.full: slower at small B)
+    adjacency, reference = np.empty((batch, n_uav, n_uav)), np.empty((batch, n_uav, 3))
+    adjacency[...], reference[...] = h0, preset[:, None, :]
+    active_obstacle = np.empty(batch, dtype=np.int64)
+    active_obstacle.fill(-1)
     return TopologyOutput(
-        adjacency=np.broadcast_to(h0, (batch, n_uav, n_uav)).copy(),
+        adjacency=adjacency,
         groups=np.zeros((batch, n_uav), dtype=np.int64),
-        reference_velocity=np.broadcast_to(preset[:, None, :], (batch, n_uav, 3)).copy(),
+        reference_velocity=reference,
         avoiding=np.zeros((batch, n_uav), dtype=bool),
-        activated=no_event,
-        restored=no_event.copy(),
-        active_obstacle=np.full(batch, -1, dtype=np.int64),
+        activated=np.zeros((batch, n_obs), dtype=bool),
+        restored=np.zeros((batch, n_obs), dtype=bool),
+        active_obstacle=active_obstacle,
     )
 
 
@@ -354,7 +367,8 @@ def _avoidance_output(
     a = _first_argmin(np.where(active, 0, 1), axis=0)  # (B,) index of the active obstacle
     cols = np.arange(batch)
     side_a = side[a, :, cols]  # (B, N)
-    follow = has_active[:, None] & (guide[a, :, cols] >= 0) & ~ended[a, :, cols]  # (B, 2)
+    guide_a = guide[a, :, cols]  # (B, 2)
+    follow = has_active[:, None] & (guide_a >= 0) & ~ended[a, :, cols]  # (B, 2)
     minus = side_a < 0  # (B, N): member of group slot 1
 
     same = (side_a[:, :, None] == side_a[:, None, :]) & ~np.eye(n_uav, dtype=bool)
@@ -367,7 +381,7 @@ def _avoidance_output(
     if not avoiding.any():
         return
 
-    g = np.maximum(guide[a, :, cols], 0)  # (B, 2)
+    g = np.maximum(guide_a, 0)  # (B, 2)
     at = (a[:, None], g, cols[:, None])
     lx, ly = tangent_direction(rel_x[at], rel_y[at], dist[at], r_safe[a][:, None], _SLOT_SIDES)
     if avoidance.reference_speed == "preset":

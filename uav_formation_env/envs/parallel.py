@@ -106,6 +106,17 @@ def penalties(sim: FormationSim, result: StepResult) -> np.ndarray:
 
 def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
     """Check an action dict and return the clipped (N, 3) array; raise ``ValueError`` if bad."""
+    if isinstance(actions, dict) and len(actions) == len(agents):
+        # Fast path for a well-formed dict (every step of a normal run): one conversion and one
+        # check for all agents. Anything unusual falls through to the agent-by-agent checks,
+        # which name the culprit.
+        try:
+            stacked = np.array([actions[agent] for agent in agents], dtype=float)
+        except (KeyError, TypeError, ValueError):
+            stacked = None
+        if stacked is not None and stacked.shape == (len(agents), 3) and np.isfinite(stacked).all():
+            # np.clip for finite values, without its Python wrappers
+            return np.minimum(np.maximum(stacked, -1.0), 1.0)
     if not isinstance(actions, dict):
         raise ValueError(f"actions must be a dict {{agent: (3,) array}}, got {type(actions)}")
     unknown = sorted(set(actions) - set(agents))
@@ -165,6 +176,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         )
         self._result: StepResult | None = None
         self._renderer = None
+        self._neighbour_cache: dict[bytes, tuple[tuple[str, ...], ...]] = {}
 
     def observation_space(self, agent: str) -> spaces.Box:
         return self.observation_spaces[agent]
@@ -190,15 +202,16 @@ class UAVFormationParallelEnv(ParallelEnv):
         result = self.sim.step(clipped[None] * self.scenario.dynamics.u_max)
         self._result = result
         penalty = penalties(self.sim, result)[0]
-        reward = -(result.cost.total[0] + penalty)
+        total = result.cost.total[0]
+        reward = -(total + penalty)
         collided = bool(result.collision[0].any())
         terminated = self.scenario.collision.mode == "terminate" and collided
         truncated = bool(result.truncated[0]) and not terminated
         obs = self._observations()
-        infos = self._infos(penalty)
-        rewards = {a: float(reward[i]) for i, a in enumerate(self.agents)}
-        terminations = {a: terminated for a in self.agents}
-        truncations = {a: truncated for a in self.agents}
+        infos = self._infos(penalty, total)
+        rewards = dict(zip(self.agents, reward.tolist()))
+        terminations = dict.fromkeys(self.agents, terminated)
+        truncations = dict.fromkeys(self.agents, truncated)
         if terminated or truncated:
             self.agents = []
         if self.render_mode == "human":
@@ -207,15 +220,18 @@ class UAVFormationParallelEnv(ParallelEnv):
 
     def _observations(self) -> dict[str, np.ndarray]:
         obs = observations_of(self.sim, self._result)[0]
-        return {a: obs[i] for i, a in enumerate(self.possible_agents)}
+        return dict(zip(self.possible_agents, obs))  # row views, as obs[i]
 
-    def _infos(self, penalty: np.ndarray) -> dict[str, dict]:
+    def _infos(self, penalty: np.ndarray, total: np.ndarray | None = None) -> dict[str, dict]:
+        """Every agent's info dict; ``total`` is the (N,) stage cost if already summed."""
         r = self._result
         names = self.possible_agents
         # one conversion per quantity, then per-agent views: this runs every step
-        total = r.cost.total[0].tolist()
+        if total is None:
+            total = r.cost.total[0]
+        total = total.tolist()
         terms = {name: value[0].tolist() for name, value in r.cost.as_dict().items()}
-        receives = (r.adjacency[0] != 0).tolist()
+        neighbours = self._neighbour_names(r.adjacency[0])
         z = r.z[0].copy()
         disturbance, estimate = r.disturbance[0].copy(), r.estimate[0].copy()
         reference = r.reference_velocity[0].copy()
@@ -230,7 +246,7 @@ class UAVFormationParallelEnv(ParallelEnv):
                 "disturbance_estimate": estimate[i],
                 "reference_velocity": reference[i],
                 "group": groups[i],
-                "neighbours": [names[j] for j, flag in enumerate(receives[i]) if flag],
+                "neighbours": list(neighbours[i]),
                 "obstacle_distance": obstacle[i],
                 "min_separation": separation[i],
                 "collision": collision[i],
@@ -241,6 +257,24 @@ class UAVFormationParallelEnv(ParallelEnv):
             }
             for i, agent in enumerate(names)
         }
+
+    def _neighbour_names(self, adjacency: np.ndarray) -> tuple[tuple[str, ...], ...]:
+        """Names of the agents each agent receives from, for an (N, N) adjacency.
+
+        Memoised per adjacency pattern: the topology takes a handful of values per scenario.
+        """
+        receives = adjacency != 0
+        key = receives.tobytes()
+        names = self._neighbour_cache.get(key)
+        if names is None:
+            agents = self.possible_agents
+            names = tuple(
+                tuple(agents[j] for j, flag in enumerate(row) if flag) for row in receives.tolist()
+            )
+            if len(self._neighbour_cache) >= 64:
+                self._neighbour_cache.clear()
+            self._neighbour_cache[key] = names
+        return names
 
     def state(self) -> np.ndarray:
         """Global state (see the module docstring)."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -52,7 +53,8 @@ def anchored(z: np.ndarray, offsets: np.ndarray, mirrored: bool = False) -> np.n
     """
     extra = z.ndim - 3
     zd = offsets.reshape(offsets.shape[0], *(1,) * extra, 6)
-    return z - relative_offset_sign(mirrored) * zd
+    # z - sign·z^d with sign = ±1, without the product (x - (-y) is exactly x + y)
+    return z + zd if mirrored else z - zd
 
 
 @dataclass(frozen=True)
@@ -85,12 +87,27 @@ class NeighbourMoments:
             (B, R, *extra).
         """
         batch, n_recv = self.degree.shape
-        extra, tail = own.ndim - 3, self.h_b.ndim - 3
+        extra = own.ndim - 3
         a = own - self.centre.reshape(batch, n_recv, *(1,) * extra, 6)
+        return self.centred_error_sq(a, np.einsum("...k,...k->...", a, a))
+
+    def centred_error_sq(self, a: np.ndarray, a_sq: np.ndarray) -> np.ndarray:
+        """:meth:`error_sq` from the receivers' centred states ``a = own - centre`` and ``||a||²``.
+
+        Args:
+            a: (B, R, *extra, 6) receivers' anchored states minus :attr:`centre`.
+            a_sq: (B, R, *extra) ``einsum("...k,...k->...", a, a)``, e.g. already computed for the
+                senders' side when receivers and senders are the same states.
+
+        Returns:
+            (B, R, *extra).
+        """
+        batch, n_recv = self.degree.shape
+        extra, tail = a.ndim - 3, self.h_b.ndim - 3
         degree = self.degree.reshape(batch, n_recv, *(1,) * extra)
         lead = (slice(None), slice(None)) + (None,) * (extra - tail)
         return (
-            degree * np.einsum("...k,...k->...", a, a)
+            degree * a_sq
             - 2.0 * np.einsum("...k,...k->...", a, self.h_b[lead])
             + self.h_bb[lead]
         )
@@ -123,6 +140,13 @@ def neighbour_moments(
     Returns:
         :class:`NeighbourMoments` with leading dims (B, R).
     """
+    return _moments_and_centred(others, adjacency, per_receiver)[0]
+
+
+def _moments_and_centred(
+    others: np.ndarray, adjacency: np.ndarray, per_receiver: bool
+) -> tuple[NeighbourMoments, np.ndarray, np.ndarray]:
+    """:func:`neighbour_moments`, plus the centred senders ``b`` and ``||b||²`` it summed."""
     batch, n_recv = adjacency.shape[:2]
     if per_receiver:
         tail = others.ndim - 4
@@ -132,16 +156,20 @@ def neighbour_moments(
         spec = "bij,bij...->bi..."
     else:
         tail = others.ndim - 3
-        first = others.reshape(batch, others.shape[1], -1, 6)[:, :, 0]
-        centre = np.broadcast_to(first.mean(axis=1)[:, None], (batch, n_recv, 6))
-        b = others - centre[:, :1].reshape(batch, 1, *(1,) * tail, 6)
+        first = others.reshape(batch, others.shape[1], -1, 6)[:, :, 0] if tail else others
+        # first.mean(axis=1) is this reduction and division, behind two Python wrappers
+        mean = np.add.reduce(first, axis=1) / first.shape[1]  # (B, 6)
+        centre = mean[:, None].repeat(n_recv, axis=1)  # (B, R, 6)
+        b = others - mean.reshape(batch, 1, *(1,) * tail, 6)
         spec = "bij,bj...->bi..."
-    return NeighbourMoments(
+    b_sq = np.einsum("...k,...k->...", b, b)
+    moments = NeighbourMoments(
         centre=centre,
-        degree=adjacency.sum(axis=-1),
+        degree=np.add.reduce(adjacency, axis=-1),
         h_b=np.einsum(spec, adjacency, b),
-        h_bb=np.einsum(spec, adjacency, np.einsum("...k,...k->...", b, b)),
+        h_bb=np.einsum(spec, adjacency, b_sq),
     )
+    return moments, b, b_sq
 
 
 def formation_error_sq(
@@ -164,7 +192,11 @@ def formation_error_sq(
     Returns:
         (B, N, *extra).
     """
-    return neighbour_moments(others, adjacency, per_receiver).error_sq(own)
+    moments, centred, centred_sq = _moments_and_centred(others, adjacency, per_receiver)
+    if own is others and not per_receiver:
+        # the stage cost's case: receivers are the senders, centred alike (the same numbers)
+        return moments.centred_error_sq(centred, centred_sq)
+    return moments.error_sq(own)
 
 
 def velocity_error_sq(velocity: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -178,9 +210,17 @@ def separation_active(weights: CostConfig) -> bool:
     return weights.separation > 0.0 and weights.separation_distance > 0.0
 
 
+@lru_cache(maxsize=16)
+def _not_eye(n_uav: int) -> np.ndarray:
+    """(N, N) ``1 - I``, cached and read-only."""
+    mask = 1.0 - np.eye(n_uav)
+    mask.flags.writeable = False
+    return mask
+
+
 def others_mask(batch: int, n_uav: int) -> np.ndarray:
     """(B, N, N) 1 for every other UAV j of receiver i, 0 on the diagonal (read-only view)."""
-    return np.broadcast_to(1.0 - np.eye(n_uav), (batch, n_uav, n_uav))
+    return np.broadcast_to(_not_eye(n_uav), (batch, n_uav, n_uav))
 
 
 def separation_sq(
@@ -204,9 +244,32 @@ def separation_sq(
     own = own.reshape(*own.shape[: 2 + lead], 1, *own.shape[2 + lead :])
     others = others.reshape(batch, n_recv, *(1,) * lead, *others.shape[2:])
     diff = own - others  # (B, R, *lead, S, *tail, 3)
-    gap = np.maximum(distance - np.sqrt(np.einsum("...k,...k->...", diff, diff)), 0.0)
+    pair = np.sqrt(np.einsum("...k,...k->...", diff, diff))
     weight = mask.reshape(batch, n_recv, *(1,) * lead, n_send, *(1,) * tail)
-    return (gap * gap * weight).sum(axis=2 + lead)
+    return _gap_sq_sum(pair, weight, distance, 2 + lead)
+
+
+def _gap_sq_sum(pair: np.ndarray, weight: np.ndarray, distance: float, axis: int) -> np.ndarray:
+    """``Σ_axis weight max(0, d_s - pair)²`` of pair distances [m] (shapes broadcast) [m²]."""
+    gap = np.maximum(distance - pair, 0.0)
+    return (gap * gap * weight).sum(axis=axis)
+
+
+def pair_distances(positions: np.ndarray) -> np.ndarray:
+    """Distance between every two UAVs of a copy, with +inf on the diagonal.
+
+    Args:
+        positions: (B, N, 3) [m].
+
+    Returns:
+        (B, N, N) ``||p_i - p_j||`` [m]; ``[:, i, i]`` is +inf, so that a minimum over j is the
+        nearest other UAV.
+    """
+    batch, n_uav = positions.shape[:2]
+    diff = positions[:, :, None, :] - positions[:, None, :, :]
+    flat = np.sqrt(np.einsum("...k,...k->...", diff, diff)).reshape(batch, n_uav * n_uav)
+    flat[:, :: n_uav + 1] = np.inf
+    return flat.reshape(batch, n_uav, n_uav)
 
 
 def stage_cost(
@@ -217,6 +280,7 @@ def stage_cost(
     offsets: np.ndarray,
     weights: CostConfig,
     mirrored: bool = False,
+    pair_distance: np.ndarray | None = None,
 ) -> CostTerms:
     """One summand of J_i on realised states (the env reward is minus its total).
 
@@ -228,6 +292,8 @@ def stage_cost(
         offsets: (N, 6) z^d.
         weights: q, r, n, s, d_s (the terminal weight m does not enter a stage).
         mirrored: literal mirrored-offset reading.
+        pair_distance: (B, N, N) :func:`pair_distances` of ``z``'s positions [m], if the caller
+            has them already; computed here otherwise (only when the separation term is on).
 
     Returns:
         :class:`CostTerms` of shape (B, N) with ``terminal = 0``; ``separation`` runs over every
@@ -235,19 +301,22 @@ def stage_cost(
     """
     a = anchored(z, offsets, mirrored)
     formation = weights.q * formation_error_sq(a, a, adjacency)
-    if separation_active(weights):
-        batch, n_uav = z.shape[:2]
-        positions = z[..., :3]
-        others = np.broadcast_to(positions[:, None], (batch, n_uav, n_uav, 3))
-        separation = weights.separation * separation_sq(
-            positions, others, others_mask(batch, n_uav), weights.separation_distance
-        )
+    distance = weights.separation_distance
+    active = separation_active(weights)
+    if active and pair_distance is None:
+        pair_distance = pair_distances(z[..., :3])
+    # The penalty is exactly +0 while every pair is at least d_s apart (the usual case); NaN
+    # distances fail the test and take the general path.
+    if active and not pair_distance.min() >= distance:
+        # the diagonal is +inf here (0 in separation_sq): either way its term is exactly +0
+        gap_sq = _gap_sq_sum(pair_distance, _not_eye(z.shape[1]), distance, axis=2)
+        separation = weights.separation * gap_sq
     else:
-        separation = np.zeros_like(formation)
+        separation = np.zeros(formation.shape)
     return CostTerms(
         formation=formation,
         energy=weights.r * np.einsum("...k,...k->...", u_n, u_n),
-        terminal=np.zeros_like(formation),
+        terminal=np.zeros(formation.shape),
         velocity=weights.n * velocity_error_sq(z[..., 3:], reference_velocity),
         separation=separation,
     )
