@@ -137,7 +137,7 @@ if SMALL:
 policies = {"LFPIO (reference)": "lfpio", "PIO": "pio", "heuristic": "heuristic",
             "random": "random"}
 for algo in ("ppo", "sac"):
-    model = MODELS / algo / "model.zip"
+    model = MODELS / f"paper_{algo}" / "model.zip"
     if model.is_file():
         policies[algo.upper()] = str(model)
 print(policies)"""

@@ -1,0 +1,165 @@
+"""Training callbacks: periodic evaluation with the package's runner, and checkpoints.
+
+Every saved model goes into a directory of its own together with the ``vecnormalize.pkl`` of the
+same moment, because :class:`uav_formation_env.evaluation.SB3Policy` normalises a model's
+observations with the statistics file beside it: ``best/model.zip``, ``checkpoints/<steps>/``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecNormalize
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.evaluation import run_episodes, summarise
+
+EVAL_KEYS = (
+    "realised_cost_mean",
+    "formation_rmse_m",
+    "collisions",
+    "min_separation_m",
+    "min_obstacle_surface_distance_m",
+)
+NORMALIZER_FILE = "vecnormalize.pkl"
+
+
+class LivePolicy:
+    """The model being trained as a batch policy for :func:`run_episodes`.
+
+    The same computation as :class:`~uav_formation_env.evaluation.SB3Policy` on a saved model
+    (deterministic actions on normalised observations), without a round trip through files.
+
+    Args:
+        model: the SB3 model.
+        normalizer: the training VecNormalize (its statistics are read, never updated here).
+    """
+
+    def __init__(self, model: BaseAlgorithm, normalizer: VecNormalize | None) -> None:
+        self.model = model
+        self.normalizer = normalizer
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        batch, n, dim = obs.shape
+        flat = obs.reshape(batch * n, dim)
+        if self.normalizer is not None:
+            flat = self.normalizer.normalize_obs(flat)
+        actions, _ = self.model.predict(flat, deterministic=True)
+        return np.clip(np.asarray(actions, dtype=float).reshape(batch, n, 3), -1.0, 1.0)
+
+
+def save_run(model: BaseAlgorithm, directory: Path, name: str = "model") -> Path:
+    """Save ``model`` as ``directory/name.zip`` and its VecNormalize beside it."""
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / f"{name}.zip"
+    model.save(path)
+    normalizer = model.get_vec_normalize_env()
+    if normalizer is not None:
+        normalizer.save(str(directory / NORMALIZER_FILE))
+    return path
+
+
+class FormationEvalCallback(BaseCallback):
+    """Every ``eval_freq`` agent-steps, fly the deterministic policy on fixed seeds.
+
+    Logs ``eval/<metric>`` for :data:`EVAL_KEYS` (SB3 logger: CSV, TensorBoard), appends a row
+    to ``out/evaluations.csv`` and keeps the model of the lowest mean realised cost in
+    ``out/best/``. (Ranking by collisions first picked poor early models that happened to fly
+    the few evaluation seeds without a collision.)
+
+    Args:
+        scenario: the scenario as evaluated (without training-only overrides).
+        seeds: one episode per seed, flown as one batch.
+        eval_freq: agent-steps between evaluations (> 0).
+        out: run directory.
+        duration: episode length [s] (None: the scenario's).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        seeds: list[int],
+        eval_freq: int,
+        out: Path,
+        duration: float | None = None,
+    ) -> None:
+        super().__init__(verbose=0)
+        self.scenario = scenario
+        self.seeds = [int(s) for s in seeds]
+        self.eval_freq = int(eval_freq)
+        self.out = Path(out)
+        self.duration = duration
+        self.best = math.inf
+        self.history: list[dict[str, Any]] = []
+        self._last = 0
+
+    def _on_training_start(self) -> None:
+        # a fresh run in a reused directory must not inherit the old run's rows
+        (self.out / "evaluations.csv").unlink(missing_ok=True)
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps - self._last >= self.eval_freq:
+            self._last = self.num_timesteps
+            self.evaluate()
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.num_timesteps != self._last:
+            self._last = self.num_timesteps
+            self.evaluate()
+
+    def evaluate(self) -> dict[str, Any]:
+        """One evaluation now; returns the summary row."""
+        policy = LivePolicy(self.model, self.model.get_vec_normalize_env())
+        summary = summarise(run_episodes(self.scenario, policy, self.seeds, duration=self.duration))
+        row: dict[str, Any] = {"timesteps": self.num_timesteps}
+        row.update({key: summary[key] for key in EVAL_KEYS})
+        for key in EVAL_KEYS:
+            if row[key] is not None:
+                self.logger.record(f"eval/{key}", float(row[key]))
+        self.logger.dump(self.num_timesteps)
+        self.history.append(row)
+        self._append_csv(row)
+        score = float(row["realised_cost_mean"])
+        if score < self.best:
+            self.best = score
+            save_run(self.model, self.out / "best")
+        return row
+
+    def _append_csv(self, row: dict[str, Any]) -> None:
+        path = self.out / "evaluations.csv"
+        new = not path.exists()
+        with open(path, "a", newline="") as stream:
+            writer = csv.DictWriter(stream, fieldnames=["timesteps", *EVAL_KEYS])
+            if new:
+                writer.writeheader()
+            writer.writerow(row)
+
+
+class CheckpointCallback(BaseCallback):
+    """Every ``save_freq`` agent-steps, save ``out/checkpoints/<steps>/model.zip`` and its
+    ``vecnormalize.pkl`` (SB3's own callback names the statistics file differently).
+
+    Args:
+        save_freq: agent-steps between checkpoints (> 0).
+        out: run directory.
+    """
+
+    def __init__(self, save_freq: int, out: Path) -> None:
+        super().__init__(verbose=0)
+        self.save_freq = int(save_freq)
+        self.out = Path(out)
+        self._last = 0
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps - self._last >= self.save_freq:
+            self._last = self.num_timesteps
+            save_run(self.model, self.out / "checkpoints" / f"{self.num_timesteps:09d}")
+        return True

@@ -1,0 +1,271 @@
+"""RL baselines: hyper-parameters, the training stack, a PPO / SAC smoke run, saving, loading
+through the package's evaluation, VecNormalize round trip, shipped models."""
+
+from __future__ import annotations
+
+import csv
+import math
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+pytest.importorskip("stable_baselines3")
+pytest.importorskip("torch")
+
+from stable_baselines3 import PPO  # noqa: E402
+from stable_baselines3.common.vec_env import VecNormalize  # noqa: E402
+
+from baselines import MODELS_DIR  # noqa: E402
+from baselines.callbacks import LivePolicy  # noqa: E402
+from baselines.config import (  # noqa: E402
+    TRAINING_DEFAULTS,
+    load_hyperparams,
+    parse_set,
+    split_params,
+)
+from baselines.evaluate import compare, evaluate_run, run_scenario  # noqa: E402
+from baselines.plots import learning_curve  # noqa: E402
+from baselines.train import main as train_main  # noqa: E402
+from baselines.wrappers import (  # noqa: E402
+    DivergenceReset,
+    RewardTransform,
+    StaggeredReset,
+    make_training_env,
+)
+from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides  # noqa: E402
+from uav_formation_env.envs.parallel import observations_of  # noqa: E402
+from uav_formation_env.envs.vector import FormationVecEnv  # noqa: E402
+from uav_formation_env.evaluation import SB3Policy, make_policy  # noqa: E402
+
+SHORT_N3 = {"duration": 4.0}  # 20 control steps per episode
+
+
+def short_scenario():
+    return with_overrides(resolve_scenario("n3"), SHORT_N3)
+
+
+@pytest.fixture(scope="module")
+def scenario_yaml(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("scenario") / "n3_short.yaml"
+    save_scenario(short_scenario(), path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def ppo_run(tmp_path_factory, scenario_yaml) -> Path:
+    """A PPO run of 1920 agent-steps (2 copies x 3 UAVs x 32 steps x 10 rollouts)."""
+    out = tmp_path_factory.mktemp("ppo_run")
+    code = train_main(
+        [
+            "--algo", "ppo", "--timesteps", "1920", "--out", str(out),
+            "--scenario", str(scenario_yaml), "--seed", "3", "--copies", "2", "--no-progress",
+            "--set", "n_steps=32", "batch_size=64", "n_epochs=2", "learning_rate=1e-3",
+            "eval_freq=576", "eval_seeds=[7]", "checkpoint_freq=960",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    return out
+
+
+# ------------------------------------------------------------------------- hyper-parameters
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_hyperparams_load_for_every_scenario(algo):
+    from baselines.train import algorithm_class
+
+    for key in ("paper", "n8", "not_a_section"):
+        params = load_hyperparams(algo, key)
+        training, kwargs = split_params(params, algorithm_class(algo))
+        assert set(training) == set(TRAINING_DEFAULTS)
+        assert "gamma" in kwargs and "copies" not in kwargs
+        assert isinstance(kwargs["policy_kwargs"]["activation_fn"], type)
+
+
+def test_set_overrides_parse_yaml_and_reject_unknown_keys():
+    patch = parse_set(["learning_rate=1e-3", "policy_kwargs.net_arch=[256, 256]", "copies=4"])
+    assert patch == {"learning_rate": 1e-3, "policy_kwargs": {"net_arch": [256, 256]}, "copies": 4}
+    with pytest.raises(ValueError, match="key=value"):
+        parse_set(["learning_rate"])
+    with pytest.raises(ValueError, match="learnin_rate"):
+        split_params({**load_hyperparams("ppo", "paper"), "learnin_rate": 1.0}, PPO)
+
+
+# ------------------------------------------------------------------------- training stack
+def test_reward_transform_is_monotone_and_log_like():
+    venv = FormationVecEnv(short_scenario(), 1)
+    wrapped = RewardTransform(venv, "log", scale=100.0)
+    venv.seed(0)
+    wrapped.reset()
+    _, raw, _, infos = venv.step(np.zeros((venv.num_envs, 3)))
+    cost = np.array([info["J"] for info in infos])
+    assert np.allclose(-raw, cost, rtol=1e-5)
+    wrapped.step_async(np.zeros((venv.num_envs, 3)))
+    _, shaped, _, infos = wrapped.step_wait()
+    cost = np.array([info["J"] for info in infos])
+    assert np.allclose(shaped, -np.log1p(cost / 100.0), rtol=1e-5)
+    with pytest.raises(ValueError, match="reward_transform"):
+        RewardTransform(venv, "square")
+
+
+def test_staggered_reset_spreads_episode_phases():
+    scenario = short_scenario()
+    base = FormationVecEnv(scenario, 4)
+    env = StaggeredReset(base)
+    env.seed(0)
+    obs = env.reset()
+    assert base.sim.steps.tolist() == [0, 5, 10, 15]  # b * T / B of a 20-step episode
+    expected = observations_of(base.sim, base.sim.last).reshape(base.num_envs, -1)
+    assert np.array_equal(obs, expected)
+    for _ in range(6):  # copy 3 truncates at step 20 and restarts; the others keep their phase
+        _, _, dones, _ = env.step(np.zeros((base.num_envs, 3)))
+    assert base.sim.steps.tolist() == [6, 11, 16, 1]
+    assert env.reset() is not None and base.sim.steps.tolist() == [0, 0, 0, 0]  # later: plain
+
+
+def test_divergence_reset_restarts_copies_off_course():
+    base = FormationVecEnv(short_scenario(), 2)
+    strict = DivergenceReset(base, max_spread=1e-3, max_velocity_error=1e3)
+    strict.seed(0)
+    strict.reset()
+    obs, _, dones, infos = strict.step(np.zeros((base.num_envs, 3)))
+    assert dones.all() and strict.resets == 2  # the random start box is > 1 mm off formation
+    assert all(info["TimeLimit.truncated"] and "terminal_observation" in info for info in infos)
+    assert base.sim.steps.tolist() == [0, 0]
+    assert np.array_equal(obs, observations_of(base.sim, base.sim.last).reshape(6, -1))
+    lenient = DivergenceReset(base, max_spread=1e4, max_velocity_error=1e4)
+    lenient.reset()
+    _, _, dones, _ = lenient.step(np.zeros((base.num_envs, 3)))
+    assert not dones.any() and lenient.resets == 0
+
+
+def test_training_stack_from_defaults():
+    from baselines.config import TRAINING_DEFAULTS
+
+    training = {**TRAINING_DEFAULTS, "copies": 3}
+    env, base = make_training_env(short_scenario(), training, gamma=0.99)
+    assert isinstance(env, VecNormalize) and env.unwrapped is base and base.num_envs == 9
+    env.seed(0)
+    obs = env.reset()
+    assert obs.shape == (9, base.observation_space.shape[0])
+    assert base.sim.steps.tolist() == [0, 6, 13]  # staggered over the 20-step episode
+    obs, rewards, _, _ = env.step(np.zeros((9, 3)))
+    assert np.all(np.isfinite(obs)) and np.all(np.isfinite(rewards))
+
+
+def test_vecnormalize_round_trip(tmp_path):
+    venv = VecNormalize(FormationVecEnv(short_scenario(), 2), clip_obs=10.0)
+    venv.seed(1)
+    venv.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(15):
+        venv.step(rng.uniform(-1, 1, (venv.num_envs, 3)))
+    raw = venv.get_original_obs()
+    path = tmp_path / "vecnormalize.pkl"
+    venv.save(str(path))
+    loaded = VecNormalize.load(str(path), FormationVecEnv(short_scenario(), 2))
+    with open(path, "rb") as stream:
+        bare = pickle.load(stream)  # as SB3Policy reads it, without a venv
+    assert np.array_equal(loaded.normalize_obs(raw), venv.normalize_obs(raw))
+    assert np.array_equal(bare.normalize_obs(raw), venv.normalize_obs(raw))
+    assert np.allclose(loaded.obs_rms.mean, venv.obs_rms.mean)
+
+
+# ------------------------------------------------------------------------- PPO smoke run
+def test_ppo_run_writes_every_output(ppo_run):
+    for name in ("model.zip", "vecnormalize.pkl", "config.yaml", "scenario.yaml", "progress.csv"):
+        assert (ppo_run / name).is_file(), name
+    assert any((ppo_run / "tensorboard").iterdir())
+    assert (ppo_run / "best" / "model.zip").is_file()
+    assert (ppo_run / "best" / "vecnormalize.pkl").is_file()
+    assert sorted(p.name for p in (ppo_run / "checkpoints").iterdir()) == [
+        "000000960",
+        "000001920",
+    ]
+    config = yaml.safe_load((ppo_run / "config.yaml").read_text())
+    assert config["algo"] == "ppo" and config["seed"] == 3
+    assert config["timesteps"] == 1920 and config["num_envs"] == 6
+    assert config["hyperparams"]["n_steps"] == 32 and config["hyperparams"]["copies"] == 2
+    assert config["wall_time_s"] > 0
+    with open(ppo_run / "evaluations.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    assert [int(r["timesteps"]) for r in rows] == [576, 1152, 1728, 1920]
+    assert all(math.isfinite(float(r["realised_cost_mean"])) for r in rows)
+
+
+def test_ppo_learning_moves_the_policy(ppo_run):
+    with open(ppo_run / "progress.csv", newline="") as stream:
+        rows = list(csv.DictReader(stream))
+    trained = [r for r in rows if r.get("train/value_loss")]
+    assert len(trained) >= 5
+    assert all(math.isfinite(float(r["train/value_loss"])) for r in trained)
+    assert all(float(r["train/approx_kl"]) > 0 for r in trained)  # the policy did change
+    returns = [float(r["rollout/ep_rew_mean"]) for r in rows if r.get("rollout/ep_rew_mean")]
+    assert returns and all(math.isfinite(x) and x < 0 for x in returns)
+    model = PPO.load(ppo_run / "model.zip", device="cpu")
+    log_std = model.policy.log_std.detach().numpy()
+    assert not np.allclose(log_std, -1.0)  # moved from log_std_init
+
+
+def test_trained_model_evaluates_through_the_package(ppo_run):
+    scenario = run_scenario(ppo_run)
+    assert scenario == short_scenario()
+    policy = make_policy(str(ppo_run / "model.zip"), scenario)
+    assert isinstance(policy, SB3Policy) and policy.algo == "PPO"
+    assert policy.normalizer is not None and not policy.normalizer.training
+    obs = observations_of(*_reset(scenario, seeds=[0, 1]))
+    actions = policy.act_batch(obs)
+    assert actions.shape == (2, 3, 3) and np.all(np.abs(actions) <= 1.0)
+    # the training-time evaluation computes the same actions as the saved model's
+    live = LivePolicy(policy.model, policy.normalizer)
+    assert np.allclose(live.act_batch(obs), actions)
+    summary = evaluate_run(ppo_run, seeds=[0, 1])
+    assert summary["n_steps"] == 20 and math.isfinite(summary["realised_cost_mean"])
+    results = compare([ppo_run], ["heuristic"], seeds=[0])
+    assert set(results) == {str(ppo_run), "heuristic"}
+    assert evaluate_run(ppo_run, seeds=[0], best=True)["n_steps"] == 20
+
+
+def test_learning_curve_png(ppo_run, tmp_path):
+    png = learning_curve([ppo_run], tmp_path / "curve.png", references={"heuristic": 1e4})
+    assert png.is_file() and png.stat().st_size > 1000
+
+
+def _reset(scenario, seeds):
+    from uav_formation_env.sim import FormationSim
+
+    sim = FormationSim(scenario, batch_size=len(seeds))
+    return sim, sim.reset(seed=seeds)
+
+
+# ------------------------------------------------------------------------- SAC smoke run
+def test_sac_smoke_run(tmp_path, scenario_yaml):
+    code = train_main(
+        [
+            "--algo", "sac", "--timesteps", "360", "--out", str(tmp_path), "--copies", "1",
+            "--scenario", str(scenario_yaml), "--no-progress",
+            "--set", "learning_starts=120", "batch_size=32", "eval_freq=0", "buffer_size=1000",
+            "policy_kwargs.net_arch=[32,32]",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    policy = make_policy(str(tmp_path / "model.zip"), short_scenario())
+    assert policy.algo == "SAC"
+    obs = observations_of(*_reset(short_scenario(), seeds=[0]))
+    assert policy.act_batch(obs).shape == (1, 3, 3)
+
+
+# ------------------------------------------------------------------------- shipped models
+SHIPPED = sorted(MODELS_DIR.glob("**/model.zip")) if MODELS_DIR.is_dir() else []
+
+
+@pytest.mark.skipif(not SHIPPED, reason="no shipped models under baselines/models yet")
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: str(p.parent.relative_to(MODELS_DIR)))
+def test_shipped_models_load_and_act(path):
+    scenario = run_scenario(path)
+    policy = make_policy(str(path), scenario)
+    obs = observations_of(*_reset(scenario, seeds=[0, 1]))
+    actions = policy.act_batch(obs)
+    assert actions.shape == (2, scenario.n_uav, 3)
+    assert np.all(np.isfinite(actions)) and np.all(np.abs(actions) <= 1.0)
