@@ -12,13 +12,11 @@ import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecNormalize
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.evaluation import run_episodes, summarise
+from uav_formation_env.evaluation import SB3Policy, run_episodes, summarise
 
 EVAL_KEYS = (
     "realised_cost_mean",
@@ -30,29 +28,11 @@ EVAL_KEYS = (
 NORMALIZER_FILE = "vecnormalize.pkl"
 
 
-class LivePolicy:
-    """The model being trained as a batch policy for :func:`run_episodes`.
-
-    The same computation as :class:`~uav_formation_env.evaluation.SB3Policy` on a saved model
-    (deterministic actions on normalised observations), without a round trip through files.
-
-    Args:
-        model: the SB3 model.
-        normalizer: the training VecNormalize (its statistics are read, never updated here).
-    """
-
-    def __init__(self, model: BaseAlgorithm, normalizer: VecNormalize | None) -> None:
-        self.model = model
-        self.normalizer = normalizer
-
-    def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        obs = np.asarray(obs, dtype=np.float32)
-        batch, n, dim = obs.shape
-        flat = obs.reshape(batch * n, dim)
-        if self.normalizer is not None:
-            flat = self.normalizer.normalize_obs(flat)
-        actions, _ = self.model.predict(flat, deterministic=True)
-        return np.clip(np.asarray(actions, dtype=float).reshape(batch, n, 3), -1.0, 1.0)
+def live_policy(model: BaseAlgorithm) -> SB3Policy:
+    """The model being trained as a batch policy for :func:`run_episodes`: the same computation
+    as :class:`~uav_formation_env.evaluation.SB3Policy` on a saved model, without a round trip
+    through files (the training VecNormalize's statistics are read, never updated)."""
+    return SB3Policy.from_model(model, model.get_vec_normalize_env())
 
 
 def save_run(model: BaseAlgorithm, directory: Path, name: str = "model") -> Path:
@@ -117,7 +97,7 @@ class FormationEvalCallback(BaseCallback):
 
     def evaluate(self) -> dict[str, Any]:
         """One evaluation now; returns the summary row."""
-        policy = LivePolicy(self.model, self.model.get_vec_normalize_env())
+        policy = live_policy(self.model)
         summary = summarise(run_episodes(self.scenario, policy, self.seeds, duration=self.duration))
         row: dict[str, Any] = {"timesteps": self.num_timesteps}
         row.update({key: summary[key] for key in EVAL_KEYS})

@@ -19,7 +19,7 @@ from stable_baselines3 import PPO  # noqa: E402
 from stable_baselines3.common.vec_env import VecNormalize  # noqa: E402
 
 from baselines import MODELS_DIR  # noqa: E402
-from baselines.callbacks import LivePolicy  # noqa: E402
+from baselines.callbacks import live_policy  # noqa: E402
 from baselines.config import (  # noqa: E402
     TRAINING_DEFAULTS,
     load_hyperparams,
@@ -218,7 +218,8 @@ def test_trained_model_evaluates_through_the_package(ppo_run):
     actions = policy.act_batch(obs)
     assert actions.shape == (2, 3, 3) and np.all(np.abs(actions) <= 1.0)
     # the training-time evaluation computes the same actions as the saved model's
-    live = LivePolicy(policy.model, policy.normalizer)
+    policy.model.set_env(_normalized_venv(policy, scenario))
+    live = live_policy(policy.model)
     assert np.allclose(live.act_batch(obs), actions)
     summary = evaluate_run(ppo_run, seeds=[0, 1])
     assert summary["n_steps"] == 20 and math.isfinite(summary["realised_cost_mean"])
@@ -269,3 +270,9 @@ def test_shipped_models_load_and_act(path):
     actions = policy.act_batch(obs)
     assert actions.shape == (2, scenario.n_uav, 3)
     assert np.all(np.isfinite(actions)) and np.all(np.abs(actions) <= 1.0)
+
+
+def _normalized_venv(policy, scenario):
+    """The loaded model's VecNormalize around a fresh VecEnv, as during training."""
+    policy.normalizer.set_venv(FormationVecEnv(scenario, policy.model.n_envs // scenario.n_uav))
+    return policy.normalizer

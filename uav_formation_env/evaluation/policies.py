@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pickle
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -134,6 +134,17 @@ class SB3Policy:
             with open(stats, "rb") as stream:
                 self.normalizer = pickle.load(stream)  # VecNormalize without its venv
             self.normalizer.training = False
+
+    @classmethod
+    def from_model(cls, model: Any, normalizer: Any | None = None) -> SB3Policy:
+        """A policy from a model in memory (e.g. during training) and its VecNormalize.
+
+        The normaliser's statistics are read, never updated, by :meth:`act_batch`.
+        """
+        policy = cls.__new__(cls)
+        policy.path, policy.model, policy.normalizer = None, model, normalizer
+        policy.algo = type(model).__name__
+        return policy
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)
