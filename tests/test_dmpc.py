@@ -34,11 +34,12 @@ NEVER = 1e300  # a threshold no J reaches: never triggered
 ALWAYS = -1.0  # J >= 0 > threshold: always triggered
 
 
-def observe(sim: FormationSim) -> np.ndarray:
-    """(B, N, dim) observations built from the sim's state exactly as the environment does."""
+def observe(sim: FormationSim, z: np.ndarray | None = None) -> np.ndarray:
+    """(B, N, dim) observations built from the sim's state exactly as the environment does
+    (with the states ``z`` in place of the sim's if given)."""
     r, sc = sim.last, sim.scenario
     return build_observations(
-        r.z,
+        r.z if z is None else z,
         r.reference_velocity,
         r.estimate,
         r.adjacency,
@@ -481,23 +482,9 @@ def close_start(scenario, gap: float = 3.0) -> tuple[FormationSim, np.ndarray, n
     """
     sim = FormationSim(scenario)
     sim.reset(seed=0)
-    r, sc = sim.last, scenario
-    z = r.z.copy()
+    z = sim.last.z.copy()
     z[0, 2, :3] = z[0, 0, :3] + np.array([0.0, gap, 0.0])
-    obs = build_observations(
-        z,
-        r.reference_velocity,
-        r.estimate,
-        r.adjacency,
-        r.avoiding,
-        r.t / sc.duration,
-        sim.offsets,
-        sim.obstacle_centers,
-        sim.obstacle_radii,
-        r.min_separation,
-        sc.formation.mirrored_offsets,
-    )
-    return sim, obs, z
+    return sim, observe(sim, z), z
 
 
 def test_j_pre_contains_the_separation_term_of_every_sensed_uav() -> None:
