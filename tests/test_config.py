@@ -174,7 +174,7 @@ def test_empty_yaml_is_paper(tmp_path: Path) -> None:
         ({"dynamics": {"dt": 0.2, "mass_kg": 3}}, "'dynamics.mass_kg'"),
         (
             {"avoidance": {"obstacles": [{"center": [0, 0], "radius": 3, "hight": 2}]}},
-            "'avoidance.obstacles.hight'",
+            "'avoidance.obstacles[0].hight'",
         ),
     ],
 )
@@ -217,7 +217,7 @@ INVALID: list[tuple[str, dict[str, Any], str]] = [
     (
         "adjacency entry 0.5",
         {"formation": {"offsets": FOUR_OFFSETS[:2], "adjacency": ((0, 1), (1, 0.5))}},
-        r"formation\.adjacency'",
+        r"formation\.adjacency\[1\]\[1\]'",
     ),
     (
         "non-zero diagonal",
@@ -486,9 +486,13 @@ def test_resolve_scenario(tmp_path: Path) -> None:
     assert resolve_scenario({"duration": 10.0, "name": "short"}) == custom
     with pytest.raises(ValueError, match=r"'durration'"):
         resolve_scenario({"durration": 10.0})
+    with pytest.raises(ValueError, match=r"scenario file not found: '.*missing\.yaml'"):
+        resolve_scenario(tmp_path / "missing.yaml")
+    with pytest.raises(TypeError, match=r"scenario must be a registered name .* got 42 \(int\)"):
+        resolve_scenario(42)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"unknown scenario 'papper'"):
         resolve_scenario("papper")
-    with pytest.raises(ValueError, match="unknown scenario"):
+    with pytest.raises(ValueError, match="scenario file not found"):
         resolve_scenario(tmp_path / "missing.yaml")
     txt = tmp_path / "short.txt"
     txt.write_text("duration: 10.0\n", encoding="utf-8")

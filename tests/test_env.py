@@ -326,6 +326,7 @@ def tight_box(mode: str, duration: float = 4.0):
         scenario=make_scenario(collision_mode=mode, obstacles="none", duration=duration),
         initial__position_low=(0.0, 0.0, 0.0),
         initial__position_high=(0.5, 0.5, 0.0),
+        initial__min_spacing=0.0,  # no minimum spacing: start in a collision on purpose
     )
 
 

@@ -21,7 +21,11 @@ from uav_formation_env.core.observation import observation_dim  # noqa: E402
 from uav_formation_env.scenarios import make_scenario  # noqa: E402
 
 # A 10 m x 10 m start box makes some copies start or drift within collision.uav_distance.
-CROWDED = {"initial__position_low": (0.0, 0.0, 0.0), "initial__position_high": (10.0, 10.0, 0.0)}
+CROWDED = {
+    "initial__position_low": (0.0, 0.0, 0.0),
+    "initial__position_high": (10.0, 10.0, 0.0),
+    "initial__min_spacing": 0.0,
+}
 CASES = {
     "paper-observer": (make_scenario(duration=4.0), {}),
     "n3-no-observer-random": (

@@ -110,7 +110,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     seeds = _seeds(args)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    policy = make_policy(args.policy, scenario, seed=seeds[0], algo=args.algo)
+    policy = make_policy(args.policy, scenario, algo=args.algo)
     batch = run_episodes(
         scenario,
         policy,

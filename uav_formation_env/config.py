@@ -150,19 +150,49 @@ PAPER_ADJACENCY: tuple[tuple[int, ...], ...] = (
 )
 
 
+def _reached(root: int, targets: np.ndarray, starts: np.ndarray, seen: np.ndarray) -> None:
+    """Mark in ``seen`` every node reachable from ``root`` (breadth first, one numpy call per
+    level) over edges in CSR form: the out-neighbours of u are ``targets[starts[u]:starts[u+1]]``.
+    """
+    frontier = np.array([root])
+    seen[root] = True
+    while frontier.size:
+        counts = starts[frontier + 1] - starts[frontier]
+        total = int(counts.sum())
+        if total == 0:
+            break
+        first = np.repeat(starts[frontier] - np.cumsum(counts) + counts, counts)
+        nodes = np.unique(targets[first + np.arange(total)])
+        frontier = nodes[~seen[nodes]]
+        seen[frontier] = True
+
+
 def has_directed_spanning_tree(adjacency: np.ndarray) -> bool:
     """Whether the graph with ``adjacency[i, j] = 1`` (i receives from j) has a spanning tree.
 
-    Edges point j -> i. A spanning tree exists iff some root reaches every node.
+    Edges point j -> i. A spanning tree exists iff some root reaches every node. Linear in the
+    number of edges: searches are started from every node not yet reached; the last such start
+    is the only candidate root (any root reaches every later start), then one search from it
+    decides.
 
     Args:
         adjacency: (N, N) 0/1 matrix.
     """
+    adjacency = np.asarray(adjacency)
     n = adjacency.shape[0]
-    reach = (adjacency.T != 0) | np.eye(n, dtype=bool)  # reach[j, i]: j -> i in <= 1 hop
-    for _ in range(max(1, int(np.ceil(np.log2(max(n, 2)))))):
-        reach = reach | ((reach.astype(np.int64) @ reach.astype(np.int64)) > 0)
-    return bool(reach.all(axis=1).any())
+    receivers, senders = np.nonzero(adjacency)  # row-major: sorted by receiver
+    order = np.argsort(senders, kind="stable")
+    targets = receivers[order]
+    starts = np.searchsorted(senders[order], np.arange(n + 1))
+    seen = np.zeros(n, dtype=bool)
+    candidate = 0
+    for node in range(n):
+        if not seen[node]:
+            _reached(node, targets, starts, seen)
+            candidate = node
+    seen[:] = False
+    _reached(candidate, targets, starts, seen)
+    return bool(seen.all())
 
 
 @dataclass(frozen=True)
@@ -328,11 +358,18 @@ class ScheduleConfig:
 
 @dataclass(frozen=True)
 class InitialStateConfig:
-    """Initial-state distribution: positions uniform in a box, one common velocity (SPEC §8)."""
+    """Initial-state distribution: positions uniform in a box, one common velocity (SPEC §8).
+
+    Positions are drawn uniformly in the box and redrawn (only the UAVs too close to another)
+    until every pair is at least ``min_spacing`` apart, so no episode starts in a collision. A
+    first draw that already keeps the spacing is used as it is.
+    """
 
     position_low: Vec3 = (0.0, -40.0, 0.0)  # [m]
     position_high: Vec3 = (40.0, 40.0, 0.0)  # [m]
     velocity: Vec3 = (20.0, 0.0, 0.0)  # [m/s]
+    # minimum distance between two UAVs at t = 0, 2.5x the default collision distance [m]
+    min_spacing: float = 5.0
 
     def __post_init__(self) -> None:
         _vec(self.position_low, 3, "initial.position_low")
@@ -343,6 +380,38 @@ class InitialStateConfig:
             "initial.position_high",
             "must be >= position_low on every axis",
         )
+        _non_negative(self.min_spacing, "initial.min_spacing")
+
+    def capacity(self) -> float:
+        """An upper bound on how many UAVs fit in the box at ``min_spacing`` (inf if 0).
+
+        Discs (balls) of radius s/2 around points s apart do not overlap and lie in the box
+        grown by s/2 on every side; in the d axes where the box has extent, their number is at
+        most that grown volume over one ball's volume.
+        """
+        s = self.min_spacing
+        if s == 0:
+            return math.inf
+        extents = [hi - lo for lo, hi in zip(self.position_low, self.position_high) if hi > lo]
+        d = len(extents)
+        ball = math.pi ** (d / 2) / math.gamma(d / 2 + 1) * (s / 2) ** d
+        return math.prod(e + s for e in extents) / ball
+
+
+@dataclass(frozen=True)
+class MissionConfig:
+    """What completing the mission means (:mod:`uav_formation_env.evaluation.mission`).
+
+    An episode completes the mission when every obstacle that the preset route passes within
+    the detection distance d^o of is met, no UAVs collide after t = 0, and the formation
+    centroid never strays more than ``max_route_error`` from the preset route.
+    """
+
+    # largest horizontal distance of the centroid from the preset route that still completes [m]
+    max_route_error: float = 100.0
+
+    def __post_init__(self) -> None:
+        _positive(self.max_route_error, "mission.max_route_error")
 
 
 @dataclass(frozen=True)
@@ -378,9 +447,18 @@ class Scenario:
     schedule: ScheduleConfig = field(default_factory=ScheduleConfig)
     initial: InitialStateConfig = field(default_factory=InitialStateConfig)
     collision: CollisionConfig = field(default_factory=CollisionConfig)
+    mission: MissionConfig = field(default_factory=MissionConfig)
 
     def __post_init__(self) -> None:
         _positive(self.duration, "duration")
+        capacity = self.initial.capacity()
+        _require(
+            self.n_uav <= capacity,
+            "initial.min_spacing",
+            f"{self.n_uav} UAVs cannot be {self.initial.min_spacing} m apart in the start box "
+            f"{self.initial.position_low}..{self.initial.position_high} (room for at most "
+            f"{capacity:.0f}); enlarge the box or lower min_spacing",
+        )
         steps = self.duration / self.dynamics.dt
         _require(
             abs(steps - round(steps)) < 1e-6 and round(steps) >= 1,

@@ -40,7 +40,7 @@ def _convert(value: Any, hint: Any, path: str) -> Any:
             raise ValueError(f"invalid scenario field '{path}': expected a list, got {value!r}")
         args = typing.get_args(hint)
         if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(item, args[0], path) for item in value)
+            return tuple(_convert(item, args[0], f"{path}[{k}]") for k, item in enumerate(value))
         if len(value) != len(args):
             raise ValueError(
                 f"invalid scenario field '{path}': expected {len(args)} entries, got {len(value)}"
@@ -75,10 +75,20 @@ def _build(cls: type[_T], data: Any, path: str) -> _T:
         raise ValueError(f"invalid scenario field '{where}': expected a mapping, got {data!r}")
     hints = typing.get_type_hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(data) - names)
+    unknown = sorted(set(data) - names, key=str)
     if unknown:
         dotted = ", ".join(f"'{path + '.' if path else ''}{key}'" for key in unknown)
         raise ValueError(f"unknown scenario key {dotted}; allowed here: {sorted(names)}")
+    required = [
+        f.name
+        for f in dataclasses.fields(cls)  # type: ignore[arg-type]
+        if f.default is dataclasses.MISSING
+        and f.default_factory is dataclasses.MISSING
+        and f.name not in data
+    ]
+    if required:
+        dotted = ", ".join(f"'{path + '.' if path else ''}{key}'" for key in required)
+        raise ValueError(f"missing scenario key {dotted} (required)")
     kwargs = {
         key: _convert(value, hints[key], f"{path + '.' if path else ''}{key}")
         for key, value in data.items()
@@ -121,10 +131,22 @@ def with_overrides(scenario: Scenario, overrides: Mapping[str, Any]) -> Scenario
 
 
 def load_scenario(path: str | Path) -> Scenario:
-    """Read a scenario from a YAML file (missing keys default to the paper's values)."""
+    """Read a scenario from a YAML file (missing keys default to the paper's values).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not valid YAML (with the line and column), or not a valid
+            scenario (naming the key).
+    """
     with open(path, encoding="utf-8") as stream:
-        data = yaml.safe_load(stream) or {}
-    return scenario_from_dict(data)
+        try:
+            data = yaml.safe_load(stream)
+        except yaml.YAMLError as error:
+            mark = getattr(error, "problem_mark", None)
+            where = "" if mark is None else f" at line {mark.line + 1}, column {mark.column + 1}"
+            problem = getattr(error, "problem", None) or str(error).splitlines()[0]
+            raise ValueError(f"{path}: not valid YAML{where}: {problem}") from None
+    return scenario_from_dict({} if data is None else data)
 
 
 def save_scenario(scenario: Scenario, path: str | Path) -> None:
@@ -154,10 +176,17 @@ def resolve_scenario(scenario: str | Path | Scenario | Mapping[str, Any] = "pape
         return scenario
     if isinstance(scenario, Mapping):
         return scenario_from_dict(scenario)
+    if not isinstance(scenario, str | Path):
+        raise TypeError(
+            f"scenario must be a registered name {sorted(SCENARIOS)}, a YAML path, a mapping or "
+            f"a Scenario, got {scenario!r} ({type(scenario).__name__})"
+        )
     if isinstance(scenario, str) and scenario in SCENARIOS:
         return SCENARIOS[scenario]()
     path = Path(scenario)
-    if path.suffix in (".yaml", ".yml") and path.is_file():
+    if path.suffix in (".yaml", ".yml"):
+        if not path.is_file():
+            raise ValueError(f"scenario file not found: {str(path)!r}")
         return load_scenario(path)
     raise ValueError(
         f"unknown scenario {str(scenario)!r}: expected one of {sorted(SCENARIOS)}, "

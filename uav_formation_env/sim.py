@@ -29,6 +29,7 @@ from uav_formation_env.core.cost import CostTerms, stage_cost
 from uav_formation_env.core.cost.stage import pair_distances
 from uav_formation_env.core.disturbances import Disturbance
 from uav_formation_env.core.dynamics import zoh_step
+from uav_formation_env.core.initial import initial_positions
 from uav_formation_env.core.observer import (
     ObserverState,
     compensation,
@@ -36,6 +37,7 @@ from uav_formation_env.core.observer import (
     observer_init,
     observer_step_held,
 )
+from uav_formation_env.seeding import check_seed
 
 NOISE_BLOCK = 100  # control steps of disturbance noise drawn per Generator call
 
@@ -68,11 +70,10 @@ class StepResult:
 
 
 def _seeds_for(seed: SeedLike, count: int) -> list[int | None]:
-    if seed is None:
-        return [None] * count
-    if isinstance(seed, int | np.integer):
-        return [int(seed) + b for b in range(count)]
-    seeds = [None if s is None else int(s) for s in seed]
+    if seed is None or isinstance(seed, int | np.integer | bool | float | str):
+        first = check_seed(seed)
+        return [None if first is None else first + b for b in range(count)]
+    seeds = [check_seed(s, f"seeds[{k}]") for k, s in enumerate(seed)]
     if len(seeds) != count:
         raise ValueError(f"expected {count} seeds (one per reset copy), got {len(seeds)}")
     return seeds
@@ -166,7 +167,7 @@ class FormationSim:
                 s = int(self._seed_streams[b].integers(2**63))
             rng = np.random.default_rng(s)
             self._rngs[b] = rng
-            self.z[b, :, :3] = low + (high - low) * rng.random((N, 3))
+            self.z[b, :, :3] = initial_positions(rng, N, low, high, cfg.initial.min_spacing)
             self.z[b, :, 3:] = cfg.initial.velocity
             self.gust[b] = self.disturbance.initial_gust(rng)
             self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)

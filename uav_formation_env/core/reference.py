@@ -13,7 +13,13 @@ import numpy as np
 
 from uav_formation_env.config import ScheduleConfig
 
-__all__ = ["config_cache", "preset_velocity", "reference_preview", "schedule_arrays"]
+__all__ = [
+    "config_cache",
+    "preset_displacement",
+    "preset_velocity",
+    "reference_preview",
+    "schedule_arrays",
+]
 
 _TIME_TOL = 1e-9  # tolerance of the schedule's "t <= times[k]" [s]
 
@@ -77,6 +83,28 @@ def preset_velocity(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
     times, velocities = schedule_arrays(schedule)
     index = times.searchsorted(np.asarray(t, dtype=float) - _TIME_TOL, side="left")
     return velocities.take(index, axis=0)  # a new array even for scalar t
+
+
+def preset_displacement(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
+    """Integral of the preset velocity (eq. 23) from 0 to t: where the preset route has gone.
+
+    Exact for the piecewise-constant schedule: leg k holds on ``(times[k-1], times[k]]`` (leg 0
+    from 0, the last leg without end), and contributes ``velocities[k]`` times the part of
+    ``[0, t]`` it covers.
+
+    Args:
+        schedule: switching times and velocities.
+        t: (...) time [s], >= 0.
+
+    Returns:
+        (..., 3) displacement [m].
+    """
+    times, velocities = schedule_arrays(schedule)
+    t = np.asarray(t, dtype=float)[..., None]  # (..., 1)
+    start = np.concatenate(([0.0], np.maximum(times, 0.0)))  # (K+1,) leg k starts
+    end = np.concatenate((np.maximum(times, 0.0), [np.inf]))  # (K+1,) and ends
+    covered = np.clip(t, start, end) - start  # (..., K+1) [s]
+    return covered @ velocities
 
 
 def reference_preview(

@@ -6,11 +6,13 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pettingzoo.utils import parallel_to_aec
+import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, with_overrides
+from uav_formation_env.envs.aec import UAVFormationAECEnv
 from uav_formation_env.envs.parallel import UAVFormationParallelEnv
+from uav_formation_env.extras import require
 
 
 def resolve_with_overrides(
@@ -42,9 +44,10 @@ def env(
     scenario: str | Path | Scenario | Mapping[str, Any] = "paper",
     render_mode: str | None = None,
     **overrides: Any,
-):
-    """The AEC view (PettingZoo's ``parallel_to_aec`` of :func:`parallel_env`)."""
-    return parallel_to_aec(parallel_env(scenario, render_mode, **overrides))
+) -> UAVFormationAECEnv:
+    """The AEC view of :func:`parallel_env` (PettingZoo's ``parallel_to_aec``, with each action
+    checked on its agent's turn: a rejected action leaves the env usable)."""
+    return UAVFormationAECEnv(parallel_env(scenario, render_mode, **overrides))
 
 
 def vec_env(
@@ -55,10 +58,25 @@ def vec_env(
     """A stable-baselines3 VecEnv over ``num_copies`` batched copies, one entry per (copy, agent).
 
     Imports stable-baselines3 lazily (the ``[rl]`` extra).
+
+    Args:
+        num_copies: B, an integer >= 1.
     """
+    if isinstance(num_copies, bool) or not isinstance(num_copies, int | np.integer):
+        raise TypeError(f"num_copies must be an integer >= 1, got {num_copies!r}")
+    if num_copies < 1:
+        raise ValueError(f"num_copies must be an integer >= 1, got {num_copies!r}")
+    require("stable_baselines3", "vec_env (a stable-baselines3 VecEnv)")
     from uav_formation_env.envs.vector import FormationVecEnv
 
     return FormationVecEnv(resolve_with_overrides(scenario, overrides), num_copies)
 
 
-__all__ = ["UAVFormationParallelEnv", "env", "parallel_env", "resolve_with_overrides", "vec_env"]
+__all__ = [
+    "UAVFormationAECEnv",
+    "UAVFormationParallelEnv",
+    "env",
+    "parallel_env",
+    "resolve_with_overrides",
+    "vec_env",
+]

@@ -104,6 +104,22 @@ def penalties(sim: FormationSim, result: StepResult) -> np.ndarray:
     return cfg.penalty * result.collision
 
 
+def validate_action(agent: str, action: Any) -> np.ndarray:
+    """One agent's action as a (3,) float array; ``ValueError`` naming the agent if it is not
+    three finite real numbers (strings, complex numbers and objects are refused, not coerced)."""
+    value = np.asarray(action)
+    if value.dtype.kind not in "biuf":
+        raise ValueError(
+            f"action of {agent} must be 3 real numbers, got {action!r} (dtype {value.dtype})"
+        )
+    value = value.astype(float)
+    if value.shape != (3,):
+        raise ValueError(f"action of {agent} must have shape (3,), got {value.shape}")
+    if not np.isfinite(value).all():
+        raise ValueError(f"action of {agent} contains NaN or infinite values: {value}")
+    return value
+
+
 def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
     """Check an action dict and return the clipped (N, 3) array; raise ``ValueError`` if bad."""
     if isinstance(actions, dict) and len(actions) == len(agents):
@@ -111,12 +127,17 @@ def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
         # check for all agents. Anything unusual falls through to the agent-by-agent checks,
         # which name the culprit.
         try:
-            stacked = np.array([actions[agent] for agent in agents], dtype=float)
+            stacked = np.array([actions[agent] for agent in agents])
         except (KeyError, TypeError, ValueError):
             stacked = None
-        if stacked is not None and stacked.shape == (len(agents), 3) and np.isfinite(stacked).all():
+        if (
+            stacked is not None
+            and stacked.dtype.kind in "iuf"
+            and stacked.shape == (len(agents), 3)
+            and np.isfinite(stacked).all()
+        ):
             # np.clip for finite values, without its Python wrappers
-            return np.minimum(np.maximum(stacked, -1.0), 1.0)
+            return np.minimum(np.maximum(stacked.astype(float), -1.0), 1.0)
     if not isinstance(actions, dict):
         raise ValueError(f"actions must be a dict {{agent: (3,) array}}, got {type(actions)}")
     unknown = sorted(set(actions) - set(agents))
@@ -125,17 +146,7 @@ def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
     missing = [a for a in agents if a not in actions]
     if missing:
         raise ValueError(f"missing action(s) for agent(s) {missing}; every live agent must act")
-    stacked = np.empty((len(agents), 3))
-    for i, agent in enumerate(agents):
-        try:
-            value = np.asarray(actions[agent], dtype=float)
-        except (TypeError, ValueError) as error:
-            raise ValueError(f"action of {agent} is not numeric: {actions[agent]!r}") from error
-        if value.shape != (3,):
-            raise ValueError(f"action of {agent} must have shape (3,), got {value.shape}")
-        if not np.isfinite(value).all():
-            raise ValueError(f"action of {agent} contains NaN or infinite values: {value}")
-        stacked[i] = value
+    stacked = np.stack([validate_action(agent, actions[agent]) for agent in agents])
     return np.clip(stacked, -1.0, 1.0)
 
 
@@ -179,10 +190,22 @@ class UAVFormationParallelEnv(ParallelEnv):
         self._neighbour_cache: dict[bytes, tuple[tuple[str, ...], ...]] = {}
 
     def observation_space(self, agent: str) -> spaces.Box:
-        return self.observation_spaces[agent]
+        try:
+            return self.observation_spaces[agent]
+        except (KeyError, TypeError):
+            raise KeyError(self._unknown_agent(agent)) from None
 
     def action_space(self, agent: str) -> spaces.Box:
-        return self.action_spaces[agent]
+        try:
+            return self.action_spaces[agent]
+        except (KeyError, TypeError):
+            raise KeyError(self._unknown_agent(agent)) from None
+
+    def _unknown_agent(self, agent: object) -> str:
+        return (
+            f"unknown agent {agent!r}: this scenario has the agents "
+            f"{self.possible_agents[0]}..{self.possible_agents[-1]}"
+        )
 
     def reset(
         self, seed: int | None = None, options: dict | None = None

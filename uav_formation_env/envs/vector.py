@@ -28,6 +28,7 @@ from uav_formation_env.envs.parallel import (
     observations_of,
     penalties,
 )
+from uav_formation_env.seeding import check_seed
 from uav_formation_env.sim import FormationSim
 
 
@@ -58,10 +59,11 @@ class FormationVecEnv(VecEnv):
     # ------------------------------------------------------------------ seeding and reset
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Seed the next reset: copy b gets ``seed + b``. Returns the seed of every entry."""
+        seed = check_seed(seed)  # before any change: a refused seed leaves the env as it was
         if seed is None:
             self._copy_seeds = [None] * self.num_copies
         else:
-            self._copy_seeds = [int(seed) + b for b in range(self.num_copies)]
+            self._copy_seeds = [seed + b for b in range(self.num_copies)]
         return [s for s in self._copy_seeds for _ in range(self.n_uav)]
 
     def reset(self) -> np.ndarray:
@@ -73,7 +75,10 @@ class FormationVecEnv(VecEnv):
 
     # ------------------------------------------------------------------ stepping
     def step_async(self, actions: np.ndarray) -> None:
-        actions = np.asarray(actions, dtype=float)
+        actions = np.asarray(actions)
+        if actions.dtype.kind not in "biuf":
+            raise ValueError(f"actions must be real numbers, got dtype {actions.dtype}")
+        actions = actions.astype(float)
         expected = (self.num_envs, 3)
         if actions.shape != expected:
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")

@@ -34,6 +34,11 @@ Metrics (:func:`summarise`), each per seed and then mean over seeds unless state
 - ``events``: activation (topology change: split in case 2) and restore time of each obstacle;
 - ``optimiser_cost_ratio_median``: median over triggered UAV-steps of J_exec / J_pre, how far
   the optimiser lowered J_i below the warm start's (DMPC policies only, else null);
+- ``mission``: the mission metrics of :mod:`~uav_formation_env.evaluation.mission` (route
+  error against the preset route, velocity-tracking RMSE, obstacles met, collisions and minimum
+  separation after t = 0, completion rate and every failure with its seed and cause), always
+  beside the cost: J_i tracks velocity, not position, so a cheap policy can leave the route;
+- ``realised_cost_ci95``: half-width of the 95 % confidence interval of the mean over seeds;
 - ``wall_time_per_step_s``: wall time of one batched control step (policy + simulation), and the
   same divided by the number of seeds.
 """
@@ -41,10 +46,18 @@ Metrics (:func:`summarise`), each per seed and then mean over seeds unless state
 from uav_formation_env.evaluation.metrics import (
     OBSERVER_WARMUP_S,
     formation_rmse,
+    mission_of,
     nash_gap_summary,
     observer_rms,
     obstacle_events,
     summarise,
+)
+from uav_formation_env.evaluation.mission import (
+    MissionMetrics,
+    mean_ci95,
+    mission_metrics,
+    mission_summary,
+    preset_route,
 )
 from uav_formation_env.evaluation.output import (
     RECORD_COLUMNS,
@@ -79,16 +92,22 @@ __all__ = [
     "BatchPolicy",
     "EpisodeBatch",
     "HeuristicPolicy",
+    "MissionMetrics",
     "ProgressLike",
     "RandomPolicy",
     "SB3Policy",
     "formation_rmse",
     "json_ready",
     "make_policy",
+    "mean_ci95",
+    "mission_metrics",
+    "mission_of",
+    "mission_summary",
     "nash_gap_summary",
     "observer_rms",
     "obstacle_events",
     "policy_plans",
+    "preset_route",
     "read_records",
     "run_episodes",
     "summarise",

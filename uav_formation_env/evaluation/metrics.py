@@ -7,6 +7,12 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.core.cost import anchored
+from uav_formation_env.evaluation.mission import (
+    MissionMetrics,
+    mean_ci95,
+    mission_metrics,
+    mission_summary,
+)
 from uav_formation_env.evaluation.runner import EpisodeBatch
 
 OBSERVER_WARMUP_S = 10.0  # observer_rms_error counts steps with t > this [s]
@@ -76,9 +82,15 @@ def _none_for_nan(x: np.ndarray) -> list[float | None]:
     return [None if np.isnan(v) else round(float(v), 6) for v in x]
 
 
+def mission_of(batch: EpisodeBatch) -> MissionMetrics:
+    """The mission metrics (:mod:`~uav_formation_env.evaluation.mission`) of an episode batch."""
+    return mission_metrics(batch.scenario, batch.t, batch.z, batch.collision, batch.min_separation)
+
+
 def summarise(batch: EpisodeBatch) -> dict[str, Any]:
     """The metrics of the module docstring as a JSON-ready dict."""
     realised = batch.stage_cost.sum(axis=0)  # (B, N)
+    _, cost_ci95 = mean_ci95(realised.mean(axis=1))
     rmse = formation_rmse(batch)
     obs_rms = observer_rms(batch)
     centre = batch.obstacle_center.min(axis=(0, 1)) if batch.obstacle_center.size else None
@@ -97,7 +109,9 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
         "triggers_per_uav_per_seed": None,
         "realised_cost_per_uav": realised.mean(axis=0).tolist(),
         "realised_cost_mean": float(realised.mean()),
+        "realised_cost_ci95": cost_ci95,
         "realised_cost_per_seed": realised.mean(axis=1).tolist(),
+        "mission": mission_summary(mission_of(batch), list(batch.seeds)),
         "formation_rmse_m": float(rmse.mean()),
         "formation_rmse_m_per_seed": rmse.tolist(),
         "min_obstacle_surface_distance_m": surface if np.isfinite(surface) else None,

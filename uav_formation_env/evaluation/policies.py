@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -10,8 +11,10 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.cost import relative_offset_sign
-from uav_formation_env.core.observation import decode_observations, others_index
+from uav_formation_env.core.observation import decode_observations, observation_dim, others_index
+from uav_formation_env.extras import require
 from uav_formation_env.policies.heuristic import ConsensusGains, consensus_pd
+from uav_formation_env.seeding import check_seed, copy_streams
 
 DMPC_OPTIMIZERS = ("lfpio", "pio", "pso", "exact", "nash")
 POLICY_NAMES = (*DMPC_OPTIMIZERS, "heuristic", "random")
@@ -19,7 +22,7 @@ SB3_ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")
 
 
 class BatchPolicy(Protocol):
-    """What :func:`run_episodes` needs of a policy."""
+    """What :func:`run_episodes` needs of a policy (``reset(batch_size, seeds)`` optional)."""
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray: ...
 
@@ -27,16 +30,27 @@ class BatchPolicy(Protocol):
 class RandomPolicy:
     """Uniform random normalised actions in [-1, 1]^3 (a lower bound on any controller).
 
+    One stream per copy, seeded from the episode seeds given to :meth:`reset` (see
+    :func:`~uav_formation_env.seeding.copy_streams`), so an episode is the same alone or in a
+    batch.
+
     Args:
-        seed: seed of the one random generator.
+        seed: the policy's seed, mixed into every copy's stream.
     """
 
     def __init__(self, seed: int | None = None) -> None:
-        self.rng = np.random.default_rng(seed)
+        self.seed = check_seed(seed, "seed")
+        self._rngs: list[np.random.Generator] = []
+
+    def reset(self, batch_size: int = 1, seeds: Sequence[int | None] | None = None) -> None:
+        """One stream per copy: from ``(seeds[b], seed)``, or spawned from ``seed``."""
+        self._rngs = copy_streams(batch_size, self.seed, seeds)
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         batch, n_uav = np.shape(obs)[:2]
-        return self.rng.uniform(-1.0, 1.0, size=(batch, n_uav, 3))
+        if len(self._rngs) != batch:
+            self.reset(batch)
+        return np.stack([g.uniform(-1.0, 1.0, size=(n_uav, 3)) for g in self._rngs])
 
 
 class HeuristicPolicy:
@@ -105,13 +119,12 @@ class SB3Policy:
     """
 
     def __init__(self, path: str | Path, algo: str | None = None, device: str = "cpu") -> None:
-        import stable_baselines3
-
         self.path = Path(path)
         if not self.path.is_file() and self.path.with_suffix(".zip").is_file():
             self.path = self.path.with_suffix(".zip")
         if not self.path.is_file():
-            raise ValueError(f"no stable-baselines3 model at {path!s}")
+            raise FileNotFoundError(f"model file not found: {str(path)!r}")
+        stable_baselines3 = require("stable_baselines3", "a stable-baselines3 model policy")
         names = [algo.upper()] if algo else list(SB3_ALGORITHMS)
         errors = []
         self.model = None
@@ -146,9 +159,33 @@ class SB3Policy:
         policy.algo = type(model).__name__
         return policy
 
+    @property
+    def observation_size(self) -> int:
+        """Number of observation values the model takes."""
+        return int(np.prod(self.model.observation_space.shape))
+
+    def check_scenario(self, scenario: Scenario) -> None:
+        """``ValueError`` naming both sizes if the model cannot act on ``scenario``'s
+        observations."""
+        expected = observation_dim(scenario.n_uav)
+        if self.observation_size != expected:
+            raise ValueError(
+                f"the model {self._name()} takes observations of {self.observation_size} values, "
+                f"but scenario {scenario.name!r} ({scenario.n_uav} UAVs) gives {expected}: it was "
+                "trained on a scenario with another number of UAVs"
+            )
+
+    def _name(self) -> str:
+        return repr(str(self.path)) if self.path is not None else "in memory"
+
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=np.float32)
         batch, n, dim = obs.shape
+        if dim != self.observation_size:
+            raise ValueError(
+                f"the model {self._name()} takes observations of {self.observation_size} values, "
+                f"got {dim} ({n} UAVs)"
+            )
         flat = obs.reshape(batch * n, dim)
         if self.normalizer is not None:
             flat = self.normalizer.normalize_obs(flat)
@@ -157,7 +194,7 @@ class SB3Policy:
 
 
 def make_policy(
-    name: str, scenario: Scenario, seed: int | None = 0, algo: str | None = None
+    name: str, scenario: Scenario, seed: int | None = None, algo: str | None = None
 ) -> BatchPolicy:
     """A policy from a name: ``lfpio``, ``pio``, ``pso`` (the reference DMPC with that optimiser),
     ``exact`` (its best response solved exactly), ``nash`` (best responses iterated to a Nash
@@ -166,7 +203,8 @@ def make_policy(
     Args:
         name: policy name or model path.
         scenario: the scenario the policy flies (mission data of DMPC / heuristic).
-        seed: seed of the policy's random generator (DMPC optimisers, random actions).
+        seed: the policy's own seed, mixed into the per-episode random streams of the DMPC
+            optimisers and the random policy (None: the episode seeds alone decide).
         algo: stable-baselines3 algorithm of a model path (None: try each).
     """
     key = name.lower()
@@ -180,7 +218,11 @@ def make_policy(
         return RandomPolicy(seed)
     path = Path(name)
     if path.is_file() or path.with_suffix(".zip").is_file():
-        return SB3Policy(path, algo)
+        policy = SB3Policy(path, algo)
+        policy.check_scenario(scenario)
+        return policy
+    if path.suffix == ".zip" or len(path.parts) > 1:
+        raise FileNotFoundError(f"policy model file not found: {name!r}")
     raise ValueError(
         f"unknown policy {name!r}: expected one of {list(POLICY_NAMES)} or the path of a "
         "stable-baselines3 model (.zip)"

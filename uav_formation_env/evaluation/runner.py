@@ -16,6 +16,7 @@ from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.envs.parallel import observations_of
 from uav_formation_env.evaluation.policies import BatchPolicy
 from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
+from uav_formation_env.seeding import check_seed
 from uav_formation_env.sim import FormationSim
 
 
@@ -105,13 +106,13 @@ def run_episodes(
     """
     if duration is not None:
         scenario = with_overrides(scenario, {"duration": float(duration)})
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("need at least one seed")
+    seeds = [check_seed(s, f"seeds[{k}]") for k, s in enumerate(seeds)]
+    if not seeds or None in seeds:
+        raise ValueError("seeds must be a non-empty list of non-negative ints")
     batch, n_steps = len(seeds), scenario.n_steps
     sim = FormationSim(scenario, batch_size=batch)
     if hasattr(policy, "reset"):
-        policy.reset(batch)
+        policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
     start = time.perf_counter()
     result = sim.reset(seed=seeds)
     obs = observations_of(sim, result)

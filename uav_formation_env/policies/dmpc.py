@@ -58,15 +58,18 @@ With ``inner_rounds = K > 1`` steps 2-4 repeat K times per step against the neig
 of the previous round (not shifted: same time), each round with the same event trigger. K = 1 is
 the paper's scheme.
 
-All randomness comes from one ``numpy.random.Generator`` seeded with ``seed``. Within one batched
-call UAV i's random draws depend on how many problems come before it in the batch (the triggered
-set); a deployment would give every UAV its own stream.
+Randomness: one ``numpy.random.Generator`` per scenario copy. ``reset(batch_size, seeds)`` seeds
+copy b's stream from its episode's seed (and the policy's ``seed``, if given), so an episode
+named by its seed flies the same, bit for bit, alone or inside any batch (the runner and
+``uav-formation evaluate`` pass the seeds). Without episode seeds the copies' streams are spawned
+from the policy's ``seed``. Within one copy, the triggered UAVs' problems share the copy's stream
+(UAV i's draws depend on which of its copy's UAVs trigger before it).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -93,8 +96,10 @@ from uav_formation_env.policies.optimizers import (
     LFPIOConfig,
     PIOConfig,
     PSOConfig,
+    RowStreams,
     minimise,
 )
+from uav_formation_env.seeding import check_seed, copy_streams
 
 __all__ = [
     "DEFAULT_THRESHOLD",
@@ -175,7 +180,9 @@ class NashDMPCPolicy:
             :class:`LFPIOConfig` / :class:`PSOConfig` / :class:`ExactConfig` /
             :class:`NashConfig` (the last sets the sweep cap, tolerance and Jacobi /
             Gauss-Seidel).
-        seed: seed of the one random generator (same seed and observations, same actions).
+        seed: policy seed: mixed into every copy's stream with the episode seeds of
+            :meth:`reset`, or, without them, the root the copies' streams are spawned from
+            (None: fresh entropy).
         threshold: event-trigger threshold on J_i(W) [-].
         inner_rounds: K exchange / re-optimise rounds per step (SPEC §5; 1 = the paper; must be 1
             for ``"nash"``, which iterates to equilibrium itself).
@@ -212,8 +219,9 @@ class NashDMPCPolicy:
         self.threshold = float(threshold)
         self.inner_rounds = int(inner_rounds)
         self.population_cost = population_cost
-        self.seed = seed
-        self.rng = np.random.default_rng(seed)
+        self.seed = check_seed(seed, "seed")
+        self._rngs: list[np.random.Generator] = []
+        self._fresh = False  # reset() was called and no step taken since
         sc = self.scenario
         self.n_uav = sc.n_uav
         self.horizon = sc.cost.horizon
@@ -226,24 +234,44 @@ class NashDMPCPolicy:
         self._wall: list[float] = []
 
     # ------------------------------------------------------------------ state
-    def reset(self, batch_size: int = 1, seed: int | None = None) -> None:
-        """Clear the broadcast plans (so W = 0 at the next step) and the records.
+    def reset(
+        self,
+        batch_size: int = 1,
+        seeds: Sequence[int | None] | None = None,
+    ) -> None:
+        """Clear the broadcast plans (so W = 0 at the next step) and the records, and seed one
+        random stream per copy.
 
-        Called automatically when every copy's observation shows t = 0 (or when B changes);
-        copies that restart alone only have their plans cleared.
+        Called automatically (keeping the streams) when every copy's observation shows t = 0
+        after a step; when B changes, the streams are spawned anew from the policy seed. Copies
+        that restart alone only have their plans cleared.
 
         Args:
             batch_size: number of scenario copies B.
-            seed: if given, re-seed the random generator.
+            seeds: the episode seed of each copy (non-negative ints, or None for a copy without
+                one); copy b's stream is seeded from ``(seeds[b], seed)``. None: every copy's
+                stream is spawned from the policy's ``seed``.
         """
-        if not isinstance(batch_size, int | np.integer) or batch_size < 1:
+        if isinstance(batch_size, bool) or not isinstance(batch_size, int | np.integer):
+            raise TypeError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        if batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
-        if seed is not None:
-            self.seed = seed
-            self.rng = np.random.default_rng(seed)
+        if seeds is not None:
+            seeds = [check_seed(s, f"seeds[{b}]") for b, s in enumerate(seeds)]
+            if len(seeds) != batch_size:
+                raise ValueError(
+                    f"seeds must hold {batch_size} seeds (one per copy), got {len(seeds)}"
+                )
+        self._rngs = copy_streams(int(batch_size), self.seed, seeds)
+        self._fresh = True
         self._plans = np.zeros((int(batch_size), self.n_uav, self.horizon, 3))
         self._records = []
         self._wall = []
+
+    @property
+    def streams(self) -> tuple[np.random.Generator, ...]:
+        """The random generator of each copy (set by :meth:`reset`)."""
+        return tuple(self._rngs)
 
     @property
     def plans(self) -> np.ndarray:
@@ -281,6 +309,12 @@ class NashDMPCPolicy:
         if obs.ndim != 3 or obs.shape[1:] != (self.n_uav, self.obs_dim):
             raise ValueError(
                 f"obs must have shape (B, {self.n_uav}, {self.obs_dim}), got {obs.shape}"
+            )
+        if not np.isfinite(obs).all():
+            copy, agent = np.argwhere(~np.isfinite(obs))[0, :2]
+            raise ValueError(
+                f"obs contains NaN or infinite values (first: copy {copy}, uav_{agent}); a "
+                "policy cannot act on them"
             )
         decoded = decode_observations(obs, self.n_uav)
         self._restart(decoded.time_fraction[:, 0] == 0.0)
@@ -374,10 +408,16 @@ class NashDMPCPolicy:
     # ------------------------------------------------------------------ internals
     def _restart(self, restart: np.ndarray) -> None:
         batch = restart.shape[0]
-        if self._plans is None or self._plans.shape[0] != batch or restart.all():
+        if self._plans is None or self._plans.shape[0] != batch:
             self.reset(batch)
+        elif restart.all() and not self._fresh:
+            # a new episode in every copy: the copies' streams go on
+            self._plans[:] = 0.0
+            self._records = []
+            self._wall = []
         elif restart.any():
             self._plans[restart] = 0.0
+        self._fresh = False
 
     def _solve(
         self, decoded: DecodedObservation, plans: np.ndarray
@@ -417,12 +457,13 @@ class NashDMPCPolicy:
                     population_cost = sub.quadratic(half_width=half[None, :, 0]).total
                 else:
                     population_cost = sub.terms_total
+                streams = RowStreams(self._rngs, trig.sum(axis=1))  # index is ordered by copy
                 result = minimise(
                     lambda x, f=population_cost: f(x[None])[0],
                     x0,
                     -half,
                     half,
-                    self.rng,
+                    streams,
                     self.optimizer,
                 )
                 result_x, n_evals = result.x, result.n_evals

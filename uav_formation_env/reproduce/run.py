@@ -41,6 +41,7 @@ from uav_formation_env.reproduce.variants import (
     variant_scenario,
     variant_spec,
 )
+from uav_formation_env.seeding import check_seed
 
 
 def _worker(args: tuple) -> tuple[str, EpisodeBatch]:
@@ -84,7 +85,9 @@ def reproduce(
             0: one per available CPU, at most one per variant). The numbers do not depend on it.
         progress: tqdm progress bars.
         records: also write per-step CSVs per variant.
-        policy_seed: seed of the DMPC optimisers' generator (None: the first episode seed).
+        policy_seed: a seed mixed into the DMPC optimisers' per-episode streams (None: the
+            streams are seeded from the episode seeds alone, so an episode's numbers do not
+            depend on which other seeds run beside it).
         variants: subset of :data:`VARIANTS` to run (all four for the report's comparison).
         game_variants: further solvers of the game for the Nash-gap comparison (observer on):
             names of :data:`GAME_VARIANTS` or paths of stable-baselines3 models; empty to skip.
@@ -94,17 +97,15 @@ def reproduce(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     base = resolve_scenario(scenario)
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("need at least one seed")
+    seeds = [check_seed(s, f"seeds[{k}]") for k, s in enumerate(seeds)]
+    if not seeds or None in seeds:
+        raise ValueError("seeds must be a non-empty list of non-negative ints")
     unknown = [v for v in variants if v not in VARIANTS]
     if unknown:
         raise ValueError(f"unknown variant(s) {unknown}; expected some of {list(VARIANTS)}")
     game_variants = [v for v in game_variants if v not in variants]
     for v in game_variants:
         variant_spec(v)  # raises for an unknown name or a missing model
-    if policy_seed is None:
-        policy_seed = seeds[0]
     if int(jobs) <= 0:
         jobs = available_cpus()
     everything = [*variants, *game_variants]
@@ -138,7 +139,7 @@ def _run_all(
     base: Scenario,
     seeds: list[int],
     duration: float | None,
-    policy_seed: int,
+    policy_seed: int | None,
     jobs: int,
     progress: bool,
 ) -> dict[str, EpisodeBatch]:

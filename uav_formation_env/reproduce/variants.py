@@ -94,7 +94,7 @@ def run_variant(
     base: Scenario,
     seeds: Sequence[int],
     duration: float | None = None,
-    policy_seed: int = 0,
+    policy_seed: int | None = None,
     progress: Any = False,
 ) -> EpisodeBatch:
     """All seeds of one variant as one batch, with the Nash gap of its plans at every step."""

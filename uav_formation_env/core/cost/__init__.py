@@ -22,7 +22,6 @@ senders runs over the receiver's own views. :func:`prepare_horizon_cost` compute
 that does not depend on the candidates once, for optimisers that evaluate many populations.
 """
 
-
 from uav_formation_env.core.cost.horizon import HorizonCost, horizon_cost, prepare_horizon_cost
 from uav_formation_env.core.cost.quadratic import (
     QuadraticCost,

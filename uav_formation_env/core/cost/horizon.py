@@ -196,8 +196,6 @@ class HorizonCost:
         )
 
 
-
-
 def prepare_horizon_cost(
     z0: np.ndarray,
     neighbour_trajectories: np.ndarray,

@@ -178,5 +178,3 @@ def superposed_rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndar
     forced = inputs.reshape(*lead, 3 * horizon) @ input_response(horizon, dt)
     forced += z0 @ state_response(horizon, dt)
     return forced.reshape(*lead, horizon + 1, 6)
-
-

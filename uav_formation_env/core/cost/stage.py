@@ -107,9 +107,7 @@ class NeighbourMoments:
         degree = self.degree.reshape(batch, n_recv, *(1,) * extra)
         lead = (slice(None), slice(None)) + (None,) * (extra - tail)
         return (
-            degree * a_sq
-            - 2.0 * np.einsum("...k,...k->...", a, self.h_b[lead])
-            + self.h_bb[lead]
+            degree * a_sq - 2.0 * np.einsum("...k,...k->...", a, self.h_b[lead]) + self.h_bb[lead]
         )
 
     def take(self, index: np.ndarray) -> NeighbourMoments:
@@ -320,5 +318,3 @@ def stage_cost(
         velocity=weights.n * velocity_error_sq(z[..., 3:], reference_velocity),
         separation=separation,
     )
-
-

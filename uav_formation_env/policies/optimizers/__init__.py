@@ -33,7 +33,6 @@ the Gaussian draws of the Lévy steps (``Generator.standard_normal``, kept so th
 same stream as before).
 """
 
-
 __all__ = [
     "COMPILED_AVAILABLE",
     "FITNESS_EPS",
@@ -43,6 +42,7 @@ __all__ = [
     "OptimResult",
     "PIOConfig",
     "PSOConfig",
+    "RowStreams",
     "fitness",
     "levy_steps",
     "mantegna_components",
@@ -67,3 +67,4 @@ from uav_formation_env.policies.optimizers.config import (
 from uav_formation_env.policies.optimizers.dispatch import minimise
 from uav_formation_env.policies.optimizers.lfpio_kernels import COMPILED_AVAILABLE
 from uav_formation_env.policies.optimizers.population import fitness, weighted_centre
+from uav_formation_env.policies.optimizers.streams import RowStreams

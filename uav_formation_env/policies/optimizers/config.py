@@ -154,5 +154,3 @@ class OptimResult:
     cost: np.ndarray
     initial_cost: np.ndarray
     n_evals: int
-
-

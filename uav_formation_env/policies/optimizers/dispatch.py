@@ -18,6 +18,7 @@ from uav_formation_env.policies.optimizers.lfpio_kernels import (
 )
 from uav_formation_env.policies.optimizers.population import Population
 from uav_formation_env.policies.optimizers.search import lfpio_search, pio_search, pso_search
+from uav_formation_env.policies.optimizers.streams import RandomSource, RowStreams
 
 
 def minimise(
@@ -25,7 +26,7 @@ def minimise(
     x0: np.ndarray,
     low: np.ndarray | float,
     high: np.ndarray | float,
-    rng: np.random.Generator,
+    rng: RandomSource,
     config: OptimConfig,
     *,
     batch_ndim: int = 1,
@@ -42,7 +43,9 @@ def minimise(
         x0: ``(*batch, *dims)`` warm start; it is pigeon 0 and the initial global best.
         low: Lower bounds, broadcastable to ``(*batch, *dims)``, finite.
         high: Upper bounds, broadcastable to ``(*batch, *dims)``, finite, ``>= low``.
-        rng: The only source of randomness.
+        rng: The only source of randomness: a generator, or
+            :class:`~uav_formation_env.policies.optimizers.streams.RowStreams` (each problem's
+            draws from its own copy's generator).
         config: :class:`PIOConfig`, :class:`LFPIOConfig` or :class:`PSOConfig`.
         batch_ndim: How many leading axes of ``x0`` are batch axes (1 for ``(M, H, 3)``).
         compiled: Run LFPIO's per-iteration bookkeeping as compiled numba kernels (the same
@@ -57,8 +60,10 @@ def minimise(
         TypeError: If ``rng`` is not a ``numpy.random.Generator`` or ``config`` is unknown.
         ValueError: On bad bounds, ``batch_ndim`` or a cost of the wrong shape.
     """
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    if not isinstance(rng, np.random.Generator | RowStreams):
+        raise TypeError(
+            f"rng must be a numpy.random.Generator or RowStreams, got {type(rng).__name__}"
+        )
     run = Population(cost_fn, x0, low, high, batch_ndim)
     if isinstance(config, PIOConfig):
         pio_search(run, rng, config)

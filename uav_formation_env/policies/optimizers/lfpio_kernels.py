@@ -253,5 +253,3 @@ def lfpio_search_compiled(run: Population, rng: np.random.Generator, cfg: LFPIOC
             weights,
             cfg.center_divide_by_np,
         )
-
-

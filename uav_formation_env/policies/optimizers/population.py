@@ -137,5 +137,3 @@ class Population:
             initial_cost=self.initial_cost.reshape(self.batch),
             n_evals=self.n_evals,
         )
-
-

@@ -85,8 +85,6 @@ def lfpio_search(run: Population, rng: np.random.Generator, cfg: LFPIOConfig) ->
         centre = weighted_centre_into(x, cost, cfg.center_divide_by_np, work)[:, None, :]
 
 
-
-
 def pso_search(run: Population, rng: np.random.Generator, cfg: PSOConfig) -> None:
     p = cfg.n_particles
     x = run.initial_population(rng, p)
@@ -106,5 +104,3 @@ def pso_search(run: Population, rng: np.random.Generator, cfg: PSOConfig) -> Non
         improved = cost < own_cost
         np.copyto(own_x, x, where=improved[..., None])
         own_cost = np.where(improved, cost, own_cost)
-
-
