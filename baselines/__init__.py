@@ -7,10 +7,14 @@ in ``baselines/hyperparams/{ppo,sac}.yml`` (rl-baselines3-zoo style, keyed by sc
 (:func:`uav_formation_env.evaluation.run_episodes`), so RL and the reference policies are compared
 on the same realised cost.
 
-- ``python -m baselines.train --algo ppo --timesteps 200000 --out runs/ppo`` (:mod:`.train`)
-- ``python -m baselines.evaluate runs/ppo --seeds 5 --compare heuristic`` (:mod:`.evaluate`)
+- :mod:`.train`:
+  ``python -m uav_formation_baselines.train --algo ppo --timesteps 200000 --out runs/ppo``
+- :mod:`.evaluate`:
+  ``python -m uav_formation_baselines.evaluate runs/ppo --seeds 5 --compare heuristic``
 
-Importing this package does not import torch or stable-baselines3; its modules do.
+The folder ``baselines/`` of the repository installs as the package ``uav_formation_baselines``
+(a top-level ``baselines`` would clash with the PyPI project of that name). Importing this package
+does not import torch or stable-baselines3; its modules do.
 """
 
 from __future__ import annotations

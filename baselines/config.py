@@ -17,7 +17,7 @@ from typing import Any
 
 import yaml
 
-from baselines import HYPERPARAMS_DIR
+from uav_formation_baselines import HYPERPARAMS_DIR
 
 # Training set-up keys (not constructor arguments of the algorithm) and their defaults.
 TRAINING_DEFAULTS: dict[str, Any] = {

@@ -1,6 +1,6 @@
 """Evaluate trained runs with the package's own runner, beside the reference policies.
 
-    python -m baselines.evaluate runs/ppo_paper [runs/sac_paper ...] --seeds 5 \
+    python -m uav_formation_baselines.evaluate runs/ppo_paper [runs/sac_paper ...] --seeds 5 \
         --compare heuristic random --out results/rl_eval
 
 Every policy flies the same seeds through :func:`uav_formation_env.evaluation.make_policy`,
@@ -8,9 +8,9 @@ Every policy flies the same seeds through :func:`uav_formation_env.evaluation.ma
 :func:`~uav_formation_env.evaluation.summarise` (what ``uav-formation evaluate`` does), so a trained
 model and the DMPC / heuristic controllers are compared on one number: the realised cost.
 
-A run directory's ``scenario.yaml`` (written by :mod:`baselines.train`) is the scenario a model is
-flown on unless another is given: a model must fly episodes of the duration it was trained on,
-since its observation carries t / duration.
+A run directory's ``scenario.yaml`` (written by :mod:`uav_formation_baselines.train`) is the
+scenario a model is flown on unless another is given: a model must fly episodes of the duration it
+was trained on, since its observation carries t / duration.
 """
 
 from __future__ import annotations
@@ -72,7 +72,7 @@ def evaluate_policy_name(
     progress: bool = False,
 ) -> dict[str, Any]:
     """Summary of one policy (a reference name or a model path) over ``seeds``."""
-    policy = make_policy(str(name), scenario, seed=int(seeds[0]), algo=algo)
+    policy = make_policy(str(name), scenario, algo=algo)
     batch = run_episodes(
         scenario, policy, list(seeds), duration=duration, policy_name=str(name), progress=progress
     )
@@ -140,7 +140,9 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit code."""
-    parser = argparse.ArgumentParser(prog="python -m baselines.evaluate", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="python -m uav_formation_baselines.evaluate", description=__doc__
+    )
     parser.add_argument("runs", nargs="*", help="run directories or model .zip files")
     parser.add_argument("--seeds", type=int, default=2, help="episodes, seeds 0..K-1")
     parser.add_argument("--seed-start", type=int, default=0)

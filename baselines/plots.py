@@ -46,7 +46,7 @@ def learning_curve(
     """Plot the learning curves of runs into ``png``.
 
     Args:
-        run_dirs: run directories of :mod:`baselines.train`.
+        run_dirs: run directories of :mod:`uav_formation_baselines.train`.
         png: output image.
         labels: one label per run (None: the directory names).
         references: horizontal lines ``{label: realised cost per UAV}`` on the evaluation panel

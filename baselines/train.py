@@ -1,6 +1,6 @@
 """Train PPO or SAC with one policy shared by every UAV (parameter sharing).
 
-    python -m baselines.train --algo ppo --timesteps 1000000 --out runs/ppo_paper \
+    python -m uav_formation_baselines.train --algo ppo --timesteps 1000000 --out runs/ppo_paper \
         [--scenario paper] [--seed 0] [--copies 8] [--threads 1] [--set key=value ...]
 
 Timesteps are *agent*-timesteps: SB3's ``num_timesteps``, which counts every (copy, agent) entry
@@ -26,8 +26,13 @@ from typing import Any
 
 import yaml
 
-from baselines import ALGOS
-from baselines.config import apply_overrides, load_hyperparams, parse_set, split_params
+from uav_formation_baselines import ALGOS
+from uav_formation_baselines.config import (
+    apply_overrides,
+    load_hyperparams,
+    parse_set,
+    split_params,
+)
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import SCENARIOS, resolve_scenario, save_scenario
 
@@ -90,8 +95,12 @@ def train(
     import torch
 
     torch.set_num_threads(int(threads))
-    from baselines.callbacks import CheckpointCallback, FormationEvalCallback, save_run
-    from baselines.wrappers import make_training_env
+    from uav_formation_baselines.callbacks import (
+        CheckpointCallback,
+        FormationEvalCallback,
+        save_run,
+    )
+    from uav_formation_baselines.wrappers import make_training_env
 
     cls = algorithm_class(algo)
     key = scenario_key(scenario)
@@ -154,7 +163,7 @@ def _versions() -> dict[str, str]:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m baselines.train",
+        prog="python -m uav_formation_baselines.train",
         description="Train PPO or SAC on a uav_formation_env scenario, one policy shared by "
         "all UAVs.",
     )

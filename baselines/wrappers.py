@@ -184,7 +184,8 @@ def make_training_env(
 
     Args:
         scenario: the scenario (``training["env_overrides"]`` are applied on top).
-        training: training set-up keys (see :data:`baselines.config.TRAINING_DEFAULTS`).
+        training: training set-up keys
+            (see :data:`uav_formation_baselines.config.TRAINING_DEFAULTS`).
         gamma: discount of the algorithm, for VecNormalize's return statistics.
     """
     overrides = training.get("env_overrides") or {}

@@ -20,10 +20,8 @@ full training stack (divergence reset, staggered start, monitor, VecNormalize) i
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -32,15 +30,11 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
+# uav_formation_baselines is the repository's baselines/ folder (installed by `pip install -e .`)
+from uav_formation_baselines.config import load_hyperparams, split_params
+from uav_formation_baselines.wrappers import make_training_env
 from uav_formation_env import vec_env
 from uav_formation_env.config_io import resolve_scenario
-
-try:
-    import baselines  # noqa: F401
-except ImportError:  # run as a script from a checkout where baselines/ is not installed
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from baselines.config import load_hyperparams, split_params  # noqa: E402
-from baselines.wrappers import make_training_env  # noqa: E402
 
 
 class ParallelCopiesVecEnv(VecEnv):

@@ -109,27 +109,23 @@ RL_VS_REFERENCE = [
     new_markdown_cell(
         "# 02 · RL baselines against the reference policy\n\n"
         "The shipped PPO and SAC models (`baselines/models/`, trained with "
-        "`python -m baselines.train`; one policy shared by every UAV) are evaluated with the same "
-        "code and seeds as the LFPIO distributed-MPC reference, PIO, the consensus heuristic "
-        "and random actions: `uav_formation_env.evaluation.make_policy`, `run_episodes` and "
-        "`summarise`, which is what `uav-formation evaluate` runs. With "
+        "`python -m uav_formation_baselines.train`; one policy shared by every UAV) are "
+        "evaluated with the same code and seeds as the LFPIO distributed-MPC reference, PIO, "
+        "the consensus heuristic and random actions: `uav_formation_env.evaluation.make_policy`, "
+        "`run_episodes` and `summarise`, which is what `uav-formation evaluate` runs. With "
         "`UAV_NOTEBOOK_SIZE=small` the episodes last 30 s and 2 seeds."
     ),
     new_code_cell(SIZE_CELL),
     new_code_cell(
-        """from pathlib import Path
-
-import matplotlib.pyplot as plt
+        """import matplotlib.pyplot as plt
 import numpy as np
 from IPython.display import Markdown, display
 
+from uav_formation_baselines import MODELS_DIR  # the shipped models (baselines/models/)
 from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import make_policy, run_episodes, summarise
 from uav_formation_env.plotting import draw_obstacles
 
-MODELS = Path("../baselines/models") if Path("../baselines/models").is_dir() else Path(
-    "baselines/models"
-)
 seeds = [0, 1] if SMALL else [0, 1, 2, 3, 4]
 scenario = resolve_scenario("paper")
 if SMALL:
@@ -137,7 +133,7 @@ if SMALL:
 policies = {"LFPIO (reference)": "lfpio", "PIO": "pio", "heuristic": "heuristic",
             "random": "random"}
 for algo in ("ppo", "sac"):
-    model = MODELS / f"paper_{algo}" / "model.zip"
+    model = MODELS_DIR / f"paper_{algo}" / "model.zip"
     if model.is_file():
         policies[algo.upper()] = str(model)
 print(policies)"""

@@ -18,18 +18,18 @@ pytest.importorskip("torch")
 from stable_baselines3 import PPO  # noqa: E402
 from stable_baselines3.common.vec_env import VecNormalize  # noqa: E402
 
-from baselines import MODELS_DIR  # noqa: E402
-from baselines.callbacks import live_policy  # noqa: E402
-from baselines.config import (  # noqa: E402
+from uav_formation_baselines import MODELS_DIR  # noqa: E402
+from uav_formation_baselines.callbacks import live_policy  # noqa: E402
+from uav_formation_baselines.config import (  # noqa: E402
     TRAINING_DEFAULTS,
     load_hyperparams,
     parse_set,
     split_params,
 )
-from baselines.evaluate import compare, evaluate_run, run_scenario  # noqa: E402
-from baselines.plots import learning_curve  # noqa: E402
-from baselines.train import main as train_main  # noqa: E402
-from baselines.wrappers import (  # noqa: E402
+from uav_formation_baselines.evaluate import compare, evaluate_run, run_scenario  # noqa: E402
+from uav_formation_baselines.plots import learning_curve  # noqa: E402
+from uav_formation_baselines.train import main as train_main  # noqa: E402
+from uav_formation_baselines.wrappers import (  # noqa: E402
     DivergenceReset,
     RewardTransform,
     StaggeredReset,
@@ -73,7 +73,7 @@ def ppo_run(tmp_path_factory, scenario_yaml) -> Path:
 # ------------------------------------------------------------------------- hyper-parameters
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_hyperparams_load_for_every_scenario(algo):
-    from baselines.train import algorithm_class
+    from uav_formation_baselines.train import algorithm_class
 
     for key in ("paper", "n8", "not_a_section"):
         params = load_hyperparams(algo, key)
@@ -141,7 +141,7 @@ def test_divergence_reset_restarts_copies_off_course():
 
 
 def test_training_stack_from_defaults():
-    from baselines.config import TRAINING_DEFAULTS
+    from uav_formation_baselines.config import TRAINING_DEFAULTS
 
     training = {**TRAINING_DEFAULTS, "copies": 3}
     env, base = make_training_env(short_scenario(), training, gamma=0.99)

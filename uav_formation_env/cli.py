@@ -6,7 +6,13 @@
 - ``uav-formation evaluate --policy lfpio --observer on --seeds 5 --out results/eval``: one policy
   (``lfpio``, ``pio``, ``pso``, ``heuristic``, ``random`` or a stable-baselines3 model path) over
   seeds: per-step CSV and ``summary.json`` (:mod:`uav_formation_env.evaluation`).
+- ``uav-formation render --policy lfpio --seed 0 --out episode.gif``: one episode as a GIF (or
+  MP4 with the ``[video]`` extra).
 - ``uav-formation run --out results/run``: one episode of the heuristic controller.
+- ``uav-formation train``: hands over to the RL baselines (the ``[rl]`` extra).
+
+A user error (a bad argument, a missing file, an invalid scenario) prints one line,
+``uav-formation: error: ...``, and exits with status 2; ``--debug`` shows the traceback.
 """
 
 from __future__ import annotations
@@ -18,7 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from uav_formation_env.config_io import resolve_scenario, with_overrides
+from uav_formation_env.config_io import SCENARIOS, resolve_scenario, with_overrides
+
+
+class UserError(Exception):
+    """A mistake in the command line's input, printed as one line."""
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -35,8 +45,7 @@ def _run(args: argparse.Namespace) -> int:
     scenario = resolve_scenario(args.scenario)
     if args.observer is not None:
         scenario = with_overrides(scenario, {"observer.enabled": args.observer == "on"})
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out_dir(args.out)
     batch = run_episodes(
         scenario,
         HeuristicPolicy(scenario),
@@ -80,9 +89,9 @@ def _scenario_for(args: argparse.Namespace):
 
 
 def _duration(args: argparse.Namespace) -> float | None:
-    if args.duration is not None:
+    if getattr(args, "duration", None) is not None:
         return float(args.duration)
-    if args.quick:
+    if getattr(args, "quick", False):
         from uav_formation_env.reproduce import QUICK_DURATION_S
 
         return QUICK_DURATION_S
@@ -90,9 +99,42 @@ def _duration(args: argparse.Namespace) -> float | None:
 
 
 def _seeds(args: argparse.Namespace) -> list[int]:
-    if args.seeds < 1:
-        raise SystemExit("--seeds must be >= 1")
     return list(range(args.seed_start, args.seed_start + args.seeds))
+
+
+def _out_dir(path: str) -> Path:
+    """``--out`` as a directory (created); a user error if it names a file."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {path!r} is a file; expected a directory (it will be created)")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def _mission_lines(summary: dict) -> list[str]:
+    """The mission metrics of a summary as a few readable lines."""
+    m = summary["mission"]
+    lines = [
+        f"mission completed: {m['completed']}/{m['episodes']} episodes "
+        f"(route error max <= {m['max_route_error_threshold_m']:g} m, every obstacle on the "
+        "route met, no collision after t = 0)",
+        f"realised J per UAV: {summary['realised_cost_mean']:.4g} "
+        f"± {summary['realised_cost_ci95']:.2g} (95% CI over seeds)",
+        f"route error: RMS {m['route_error_rms_m']:.1f} ± {m['route_error_rms_m_ci95']:.1f} m, "
+        f"max {m['route_error_max_m']:.1f} ± {m['route_error_max_m_ci95']:.1f} m; velocity "
+        f"RMSE {m['velocity_rmse_mps']:.2f} m/s",
+        f"collisions after t = 0: {m['collisions_after_start']} UAV-steps; min separation "
+        f"after t = 0: {m['min_separation_after_start_m']:.1f} m",
+    ]
+    for name, o in m["obstacles"].items():
+        required = sum(o["required_per_seed"])
+        lines.append(
+            f"{name}: met in {o['met']}/{m['episodes']} (on the route in {required}), "
+            f"closest {o['closest_center_m']:.1f} m from its centre"
+        )
+    for seed, why in m["failures"].items():
+        lines.append(f"seed {seed} failed: {'; '.join(why)}")
+    return lines
 
 
 def _evaluate(args: argparse.Namespace) -> int:
@@ -108,8 +150,7 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     scenario = _scenario_for(args)
     seeds = _seeds(args)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _out_dir(args.out)
     policy = make_policy(args.policy, scenario, algo=args.algo)
     batch = run_episodes(
         scenario,
@@ -129,27 +170,48 @@ def _evaluate(args: argparse.Namespace) -> int:
         title=f"{args.policy}, observer {'on' if scenario.observer.enabled else 'off'}, "
         f"seed {seeds[0]}",
     )
-    keys = (
-        "triggers_per_uav",
-        "triggers_mean",
-        "realised_cost_mean",
-        "formation_rmse_m",
-        "min_obstacle_surface_distance_m",
-        "min_separation_m",
-        "collisions",
-        "observer_rms_error",
-        "wall_time_per_step_s",
+    observer = "on" if scenario.observer.enabled else "off"
+    print(
+        f"{args.policy} on {scenario.name!r} (observer {observer}), seeds "
+        f"{seeds[0]}..{seeds[-1]}, {scenario.duration:g} s episodes"
     )
-    print(json.dumps({k: summary[k] for k in keys}, indent=2))
+    for line in _mission_lines(summary):
+        print(f"  {line}")
+    if summary["triggers_mean"] is not None:
+        print(f"  event-triggered steps per UAV: {summary['triggers_mean']:.1f}")
     print(f"wrote {out / 'records.csv'}, {out / 'summary.json'}, {out / 'trajectories.png'}")
+    return 0
+
+
+def _render(args: argparse.Namespace) -> int:
+    from uav_formation_env.evaluation import make_policy
+    from uav_formation_env.render import render_episode
+
+    scenario = _scenario_for(args)
+    policy = make_policy(args.policy, scenario, algo=args.algo)
+    out = Path(args.out)
+    if out.is_dir():
+        raise UserError(f"--out {args.out!r} is a directory; expected a .gif or .mp4 file name")
+    path = render_episode(
+        scenario,
+        policy,
+        args.seed,
+        out,
+        policy_name=args.policy,
+        fps=args.fps,
+        every=args.every,
+        progress=not args.quiet,
+    )
+    print(f"wrote {path}")
     return 0
 
 
 def _reproduce(args: argparse.Namespace) -> int:
     from uav_formation_env.reproduce import LABELS, reproduce
 
+    out = _out_dir(args.out)
     result = reproduce(
-        args.out,
+        out,
         seeds=_seeds(args),
         scenario=args.scenario,
         duration=_duration(args),
@@ -172,62 +234,148 @@ def _reproduce(args: argparse.Namespace) -> int:
             f"{row['label']:>40}: Nash gap median {row['gap_median']:.3g} "
             f"p90 {row['gap_p90']:.3g} | {row['policy_ms_per_step']:.2f} ms/step"
         )
+    for variant, s in summary["variants"].items():
+        m = s["mission"]
+        print(
+            f"{LABELS[variant]:>15}: mission completed {m['completed']}/{m['episodes']} | route "
+            f"error max {m['route_error_max_m']:.1f} m | collisions after t = 0 "
+            f"{m['collisions_after_start']}"
+        )
     print(f"wrote {result.out}/table2.csv, nash_gap.csv, summary.json, REPORT.md and figures")
+    duration, full = _duration(args), resolve_scenario(args.scenario).duration
+    if duration is not None and duration < full:
+        print(
+            f"warning: {duration:g} s episodes, not the scenario's {full:g} s: trigger counts, "
+            "costs and events are not comparable to the paper's Table 2"
+        )
     return 0
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """Defaults in every option's help, and descriptions as written."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``uav-formation: error: ...``, exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"uav-formation: error: {message} (see {self.prog} --help)\n")
+
+
+def _integer(minimum: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {value}")
+        return value
+
+    parse.__name__ = f"integer >= {minimum}"
+    return parse
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
+    return value
+
+
+SCENARIO_HELP = f"registered name ({', '.join(SCENARIOS)}) or path of a YAML scenario"
+
+
 def _add_common(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", default="paper", help="registered name or YAML path")
-    parser.add_argument("--seeds", type=int, default=5, help="number of episodes (seeds)")
-    parser.add_argument("--seed-start", type=int, default=0, help="first seed (then +1, ...)")
-    parser.add_argument("--duration", type=float, default=None, help="episode length [s]")
+    parser.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
+    parser.add_argument("--seeds", type=_integer(1), default=5, help="number of episodes (seeds)")
+    parser.add_argument(
+        "--seed-start", type=_integer(0), default=0, help="first seed (then +1, ...)"
+    )
+    parser.add_argument("--duration", type=_positive_float, default=None, help="episode length [s]")
     parser.add_argument(
         "--quick", action="store_true", help="20 s episodes (smoke test; --duration wins)"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+POLICY_HELP = (
+    "lfpio, pio, pso, exact, nash (the reference DMPC with that solver), heuristic, random, or a "
+    "stable-baselines3 model path (.zip; a vecnormalize.pkl beside it is applied)"
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="uav-formation", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="fly a scenario with the heuristic consensus controller")
-    run.add_argument("--scenario", default="paper", help="registered name or YAML path")
-    run.add_argument("--seed", type=int, default=0)
-    run.add_argument("--observer", choices=["on", "off"], default=None)
-    run.add_argument("--out", default="results/run")
-    run.add_argument("--quiet", action="store_true")
+    from uav_formation_env.reproduce.nash_analysis import NASH_FIGURE
+    from uav_formation_env.reproduce.variants import FIGURES
+
+    parser = _Parser(prog="uav-formation", description=__doc__, formatter_class=_HelpFormatter)
+    parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    run = sub.add_parser(
+        "run",
+        help="fly a scenario with the heuristic consensus controller",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    run.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
+    run.add_argument("--seed", type=_integer(0), default=0, help="episode seed")
+    run.add_argument("--observer", choices=["on", "off"], default=None, help="override")
+    run.add_argument("--out", default="results/run", help="output directory")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
 
     evaluate = sub.add_parser(
         "evaluate",
-        help="evaluate a policy over seeds (per-step CSV, summary.json)",
+        help="evaluate a policy over seeds: mission metrics, per-step CSV, summary.json",
         description="Run one policy on B seeds as one batch and write records.csv, "
-        "summary.json and trajectories.png (first seed).",
+        "summary.json (cost and mission metrics: route error, obstacles met, collisions after "
+        "t = 0, completion) and trajectories.png (first seed).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
+    evaluate.add_argument("--policy", default="lfpio", help=POLICY_HELP)
+    evaluate.add_argument("--algo", default=None, help="SB3 algorithm of a model (None: try each)")
     evaluate.add_argument(
-        "--policy",
-        default="lfpio",
-        help="lfpio, pio, pso, exact, nash (reference DMPC), heuristic, random, or a SB3 "
-        "model path (.zip; a vecnormalize.pkl beside it is applied)",
+        "--observer", choices=["on", "off"], default=None, help="override the scenario's"
     )
-    evaluate.add_argument("--algo", default=None, help="SB3 algorithm of a model (default: try)")
-    evaluate.add_argument("--observer", choices=["on", "off"], default=None)
-    evaluate.add_argument("--out", default="results/eval")
+    evaluate.add_argument("--out", default="results/eval", help="output directory")
     _add_common(evaluate)
     evaluate.set_defaults(func=_evaluate)
 
+    render = sub.add_parser(
+        "render",
+        help="fly one episode and write it as a GIF (or MP4 with the [video] extra)",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    render.add_argument("--policy", default="lfpio", help=POLICY_HELP)
+    render.add_argument("--algo", default=None, help="SB3 algorithm of a model (None: try each)")
+    render.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
+    render.add_argument("--seed", type=_integer(0), default=0, help="episode seed")
+    render.add_argument("--observer", choices=["on", "off"], default=None, help="override")
+    render.add_argument("--duration", type=_positive_float, default=None, help="episode length [s]")
+    render.add_argument("--fps", type=_integer(1), default=10, help="frames per second")
+    render.add_argument("--every", type=_integer(1), default=5, help="one frame every K steps")
+    render.add_argument("--out", default="results/episode.gif", help="a .gif or .mp4 file")
+    render.add_argument("--quiet", action="store_true", help="no progress bar")
+    render.set_defaults(func=_render)
+
+    figures = ", ".join((*FIGURES, NASH_FIGURE))
     reproduce = sub.add_parser(
         "reproduce",
-        help="the paper's four variants: Table 2, Figs. 5-9, REPORT.md",
+        help="the paper's four variants: Table 2, Figs. 5-10, REPORT.md",
         description="Fly {PIO, LFPIO} x {NFTSMO off, on} on the same seeds (each variant's "
-        "seeds as one batch) and write table2.csv, summary.json, the figures and REPORT.md.",
+        "seeds as one batch), plus the game variants, and write table2.csv, nash_gap.csv, "
+        f"summary.json (with the mission metrics), REPORT.md and the figures {figures}.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    reproduce.add_argument("--out", default="results/paper")
+    reproduce.add_argument("--out", default="results/paper", help="output directory")
     reproduce.add_argument(
         "--jobs",
-        type=int,
+        type=_integer(0),
         default=0,
-        help="variants run in parallel processes (default 0: one per CPU, at most 4); "
+        help="variants run in parallel processes (0: one per CPU, at most one per variant); "
         "the numbers do not depend on it",
     )
     reproduce.add_argument(
@@ -244,7 +392,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(reproduce)
     reproduce.set_defaults(func=_reproduce)
 
-    # Listed here for --help only: main() hands every argument after "train" to baselines.train.
+    # Listed here for --help only: main() hands every argument after "train" to the baselines.
     sub.add_parser(
         "train",
         help="train PPO or SAC with one policy shared by all UAVs (the [rl] extra; "
@@ -255,22 +403,40 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _train(argv: list[str]) -> int:
-    try:
-        from baselines.train import main as train_main
-    except ImportError as error:
-        raise SystemExit(
-            "uav-formation train needs the [rl] extra (torch, stable-baselines3) and the "
-            f"baselines package of this repository: {error}"
-        ) from error
+    from uav_formation_env.extras import require
+
+    require("stable_baselines3", "uav-formation train")
+    from uav_formation_baselines.train import main as train_main
+
     return int(train_main(argv))
 
 
+def _one_line(error: BaseException) -> str:
+    text = error.args[0] if isinstance(error, KeyError) and error.args else str(error)
+    text = " ".join(str(text).split()) or type(error).__name__
+    if isinstance(error, UserError | ValueError | TypeError | KeyError | OSError | ImportError):
+        return text
+    return f"{text} ({type(error).__name__}; run with --debug for the traceback)"
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line; user errors print one line and return 2."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv[:1] == ["train"]:
-        return _train(argv[1:])
-    args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    debug = "--debug" in argv
+    argv = [a for a in argv if a != "--debug"]
+    try:
+        if argv[:1] == ["train"]:
+            return _train(argv[1:])
+        args = build_parser().parse_args(argv)
+        return int(args.func(args))
+    except KeyboardInterrupt:
+        print("uav-formation: interrupted", file=sys.stderr)
+        return 130
+    except Exception as error:  # noqa: BLE001 - the CLI never shows a traceback unless asked
+        if debug:
+            raise
+        print(f"uav-formation: error: {_one_line(error)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
