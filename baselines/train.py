@@ -33,6 +33,7 @@ from uav_formation_baselines.config import (
     parse_set,
     split_params,
 )
+from uav_formation_env.cli import OneLineParser, integer_at_least
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import SCENARIOS, resolve_scenario, save_scenario
 
@@ -162,7 +163,7 @@ def _versions() -> dict[str, str]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m uav_formation_baselines.train",
         description="Train PPO or SAC on a uav_formation_env scenario, one policy shared by "
         "all UAVs.",
@@ -170,16 +171,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--algo", choices=ALGOS, required=True)
     parser.add_argument(
         "--timesteps",
-        type=int,
+        type=integer_at_least(1),
         required=True,
         help="agent-timesteps: SB3's num_timesteps, counting every (copy, agent) entry, so one "
         "control step of B copies of N UAVs is B*N timesteps",
     )
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--scenario", default="paper", help="registered name or YAML path")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--copies", type=int, default=None, help="scenario copies B")
-    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    parser.add_argument("--seed", type=integer_at_least(0), default=0)
+    parser.add_argument(
+        "--copies", type=integer_at_least(1), default=None, help="scenario copies B"
+    )
+    parser.add_argument("--threads", type=integer_at_least(1), default=1, help="torch threads")
     parser.add_argument(
         "--set",
         dest="overrides",

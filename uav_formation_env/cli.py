@@ -255,14 +255,16 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescrip
     """Defaults in every option's help, and descriptions as written."""
 
 
-class _Parser(argparse.ArgumentParser):
+class OneLineParser(argparse.ArgumentParser):
     """argparse with one-line errors: ``uav-formation: error: ...``, exit status 2."""
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"uav-formation: error: {message} (see {self.prog} --help)\n")
 
 
-def _integer(minimum: int):
+def integer_at_least(minimum: int):
+    """An argparse type: an integer >= ``minimum``, else a message naming the value."""
+
     def parse(text: str) -> int:
         try:
             value = int(text)
@@ -276,7 +278,9 @@ def _integer(minimum: int):
     return parse
 
 
-def _positive_float(text: str) -> float:
+def positive_number(text: str) -> float:
+    """An argparse type: a finite number > 0."""
+
     try:
         value = float(text)
     except ValueError:
@@ -291,11 +295,13 @@ SCENARIO_HELP = f"registered name ({', '.join(SCENARIOS)}) or path of a YAML sce
 
 def _add_common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
-    parser.add_argument("--seeds", type=_integer(1), default=5, help="number of episodes (seeds)")
     parser.add_argument(
-        "--seed-start", type=_integer(0), default=0, help="first seed (then +1, ...)"
+        "--seeds", type=integer_at_least(1), default=5, help="number of episodes (seeds)"
     )
-    parser.add_argument("--duration", type=_positive_float, default=None, help="episode length [s]")
+    parser.add_argument(
+        "--seed-start", type=integer_at_least(0), default=0, help="first seed (then +1, ...)"
+    )
+    parser.add_argument("--duration", type=positive_number, default=None, help="episode length [s]")
     parser.add_argument(
         "--quick", action="store_true", help="20 s episodes (smoke test; --duration wins)"
     )
@@ -312,16 +318,18 @@ def build_parser() -> argparse.ArgumentParser:
     from uav_formation_env.reproduce.nash_analysis import NASH_FIGURE
     from uav_formation_env.reproduce.variants import FIGURES
 
-    parser = _Parser(prog="uav-formation", description=__doc__, formatter_class=_HelpFormatter)
+    parser = OneLineParser(
+        prog="uav-formation", description=__doc__, formatter_class=_HelpFormatter
+    )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     run = sub.add_parser(
         "run",
         help="fly a scenario with the heuristic consensus controller",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     run.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
-    run.add_argument("--seed", type=_integer(0), default=0, help="episode seed")
+    run.add_argument("--seed", type=integer_at_least(0), default=0, help="episode seed")
     run.add_argument("--observer", choices=["on", "off"], default=None, help="override")
     run.add_argument("--out", default="results/run", help="output directory")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -352,11 +360,13 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--policy", default="lfpio", help=POLICY_HELP)
     render.add_argument("--algo", default=None, help="SB3 algorithm of a model (None: try each)")
     render.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
-    render.add_argument("--seed", type=_integer(0), default=0, help="episode seed")
+    render.add_argument("--seed", type=integer_at_least(0), default=0, help="episode seed")
     render.add_argument("--observer", choices=["on", "off"], default=None, help="override")
-    render.add_argument("--duration", type=_positive_float, default=None, help="episode length [s]")
-    render.add_argument("--fps", type=_integer(1), default=10, help="frames per second")
-    render.add_argument("--every", type=_integer(1), default=5, help="one frame every K steps")
+    render.add_argument("--duration", type=positive_number, default=None, help="episode length [s]")
+    render.add_argument("--fps", type=integer_at_least(1), default=10, help="frames per second")
+    render.add_argument(
+        "--every", type=integer_at_least(1), default=5, help="one frame every K steps"
+    )
     render.add_argument("--out", default="results/episode.gif", help="a .gif or .mp4 file")
     render.add_argument("--quiet", action="store_true", help="no progress bar")
     render.set_defaults(func=_render)
@@ -373,7 +383,7 @@ def build_parser() -> argparse.ArgumentParser:
     reproduce.add_argument("--out", default="results/paper", help="output directory")
     reproduce.add_argument(
         "--jobs",
-        type=_integer(0),
+        type=integer_at_least(0),
         default=0,
         help="variants run in parallel processes (0: one per CPU, at most one per variant); "
         "the numbers do not depend on it",

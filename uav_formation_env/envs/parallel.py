@@ -54,6 +54,7 @@ from uav_formation_env.core.observation import (
     build_observations,
     observation_dim,
 )
+from uav_formation_env.seeding import check_seed
 from uav_formation_env.sim import FormationSim, StepResult
 
 RENDER_MODES = ["rgb_array", "human"]
@@ -210,7 +211,9 @@ class UAVFormationParallelEnv(ParallelEnv):
     def reset(
         self, seed: int | None = None, options: dict | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
-        """Start an episode; ``seed`` makes it (and later unseeded resets) reproducible."""
+        """Start an episode; ``seed`` (None or an int >= 0) makes it (and later unseeded resets)
+        reproducible."""
+        seed = check_seed(seed)
         self._result = self.sim.reset(seed=None if seed is None else [seed])
         self.agents = list(self.possible_agents)
         if self._renderer is not None:

@@ -1,9 +1,12 @@
 """Policies acting from observations: the reference DMPC, its optimisers, exact best responses.
 
-Only the light modules are re-exported here (exact best responses and the Nash-gap analysis), so
-that importing one policy module does not load the optimisers' compiled kernels; import
-:class:`~uav_formation_env.policies.dmpc.NashDMPCPolicy` from its module.
+The light modules are imported here (exact best responses and the Nash-gap analysis);
+:class:`~uav_formation_env.policies.dmpc.NashDMPCPolicy` is imported on first use
+(``from uav_formation_env.policies import NashDMPCPolicy``), so that importing one policy module
+does not load the optimisers' compiled kernels.
 """
+
+from typing import Any
 
 from uav_formation_env.policies.best_response import (
     BestResponse,
@@ -23,8 +26,25 @@ from uav_formation_env.policies.nash import (
     nash_gap,
 )
 
+_LAZY = {
+    "NashDMPCPolicy": "uav_formation_env.policies.dmpc",
+    "DMPCRecords": "uav_formation_env.policies.dmpc",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import the DMPC policy on first use (PEP 562)."""
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
     "NASH_METHODS",
+    "DMPCRecords",
+    "NashDMPCPolicy",
     "BestResponse",
     "BoxQPResult",
     "ExactConfig",
