@@ -57,6 +57,7 @@ from uav_formation_env.evaluation.mission import (
     mean_ci95,
     mission_metrics,
     mission_summary,
+    mission_table,
     preset_route,
 )
 from uav_formation_env.evaluation.output import (
@@ -103,6 +104,7 @@ __all__ = [
     "mission_metrics",
     "mission_of",
     "mission_summary",
+    "mission_table",
     "nash_gap_summary",
     "observer_rms",
     "obstacle_events",

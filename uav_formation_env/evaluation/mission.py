@@ -233,3 +233,51 @@ def mission_summary(metrics: MissionMetrics, seeds: list[int]) -> dict[str, Any]
     }
     summary["failures"] = {str(seed): why for seed, why in zip(seeds, metrics.failures()) if why}
     return summary
+
+
+def mission_table(summaries: dict[str, dict[str, Any]]) -> list[str]:
+    """Markdown lines: one row per policy with the cost beside the mission metrics, then the
+    failed seeds and their causes.
+
+    Args:
+        summaries: label -> :func:`~uav_formation_env.evaluation.summarise` output (with its
+            ``"mission"`` entry).
+    """
+    first = next(iter(summaries.values()))["mission"]
+    obstacles = list(first["obstacles"])
+    head = " | ".join(f"{name} met" for name in obstacles)
+    lines = [
+        "| policy | mission completed | realised J / UAV (± 95% CI) | route error RMS [m] "
+        f"| route error max [m] | velocity RMSE [m/s] | {head} | collisions after t = 0 "
+        "| min separation after t = 0 [m] |",
+        "|---" * (8 + len(obstacles)) + "|",
+    ]
+    failures = []
+    for label, s in summaries.items():
+        m = s["mission"]
+        met = " | ".join(f"{m['obstacles'][o]['met']}/{m['episodes']}" for o in obstacles)
+        lines.append(
+            f"| {label} | **{m['completed']}/{m['episodes']}** | "
+            f"{s['realised_cost_mean']:.4g} ± {s['realised_cost_ci95']:.2g} | "
+            f"{m['route_error_rms_m']:.1f} ± {m['route_error_rms_m_ci95']:.1f} | "
+            f"{m['route_error_max_m']:.1f} ± {m['route_error_max_m_ci95']:.1f} | "
+            f"{m['velocity_rmse_mps']:.2f} | {met} | {m['collisions_after_start']} | "
+            f"{m['min_separation_after_start_m']:.1f} |"
+        )
+        failures += [
+            f"- {label}, seed {seed}: {'; '.join(why)}" for seed, why in m["failures"].items()
+        ]
+    lines += [
+        "",
+        "Completed: every obstacle the preset route passes within its detection distance is "
+        "met, no collision after t = 0, and the centroid stays within "
+        f"{first['max_route_error_threshold_m']:g} m of the preset route "
+        "(`mission.max_route_error`). ± is the half-width of the 95% confidence interval over "
+        "seeds (Student t).",
+        "",
+    ]
+    if failures:
+        lines += ["Failed episodes:", "", *failures, ""]
+    else:
+        lines += ["Every episode completed the mission.", ""]
+    return lines

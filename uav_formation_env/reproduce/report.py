@@ -10,6 +10,7 @@ import numpy as np
 from uav_formation_env.evaluation import (
     OBSERVER_WARMUP_S,
     EpisodeBatch,
+    mission_table,
 )
 from uav_formation_env.reproduce.explanations import difference_paragraphs, fmt_number
 from uav_formation_env.reproduce.tables import table2_rows, trigger_counts
@@ -186,6 +187,17 @@ def build_report(batches: dict[str, EpisodeBatch], summary: dict[str, Any]) -> s
         "Σ over the episode of UAV i's stage cost J_i (the env's −reward), mean over UAVs and "
         "seeds. Seconds per episode = the variant's batch wall time / seeds.",
         "",
+    ]
+
+    lines += [
+        "## Mission",
+        "",
+        "The paper's J_i tracks the preset velocity, not a position, so the cost alone cannot "
+        "tell whether a variant flies the mission; these metrics judge the flight against the "
+        "preset route (the centroid at t = 0 plus the integral of the preset velocity of "
+        "eq. 23, without avoidance deflections).",
+        "",
+        *mission_table({LABELS[variant]: s for variant, s in v.items()}),
     ]
 
     lines += ["## Figures", ""]
