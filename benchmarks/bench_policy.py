@@ -1,8 +1,8 @@
 """NashDMPCPolicy on the whole paper scenario, closed loop through FormationSim.
 
 Prints, per optimiser and observer setting: seconds per 1000-step episode and per control step
-(policy alone and policy + simulator), trigger counts per UAV (SPEC §8 Table 2), the minimum
-distance to the obstacle centres, and collisions (two UAVs closer than the scenario's 2 m).
+(policy alone and policy + simulator), trigger counts per UAV (docs/model.md §8, Table 2), the
+minimum distance to the obstacle centres, and collisions (two UAVs closer than the scenario's 2 m).
 Seeds run one after another as B = 1 episodes, or all at once as B copies with ``--batched``
 (one optimiser call per step for every copy: seconds per episode = wall time / B).
 

@@ -1,4 +1,4 @@
-"""Tests of the game cost J_i (eq. 6, SPEC §4): hand values, invariants, one definition."""
+"""Tests of the game cost J_i (eq. 6, docs/model.md §4): hand values, invariants, one definition."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Tests of the disturbance model (SPEC §2, eq. 21), wind and Gauss-Markov gust."""
+"""Tests of the disturbance model (docs/model.md §2, eq. 21), wind and Gauss-Markov gust."""
 
 from __future__ import annotations
 

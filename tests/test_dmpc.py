@@ -1,4 +1,4 @@
-"""NashDMPCPolicy (SPEC §4.3, §5): warm start, trigger, one J_i, information pattern, closed loop.
+"""NashDMPCPolicy (docs/model.md §4.3, §5): warm start, trigger, one J_i, information pattern, closed loop.
 
 Also the per-receiver generalisation of the cost (``core/cost.py``) the policy relies on.
 """
@@ -167,7 +167,7 @@ def test_mixed_triggers_keep_w_for_the_untriggered(scenario) -> None:
 
 
 def test_search_box_respects_the_compensation() -> None:
-    """|u_n,c| <= u_max - |u_d,c| with u_d = -estimate (SPEC §1.5)."""
+    """|u_n,c| <= u_max - |u_d,c| with u_d = -estimate (docs/model.md §1.5)."""
     scenario = paper_scenario()
     sim = FormationSim(scenario)
     sim.reset(seed=0)

@@ -1,4 +1,4 @@
-"""Tests of the double-integrator plant (SPEC §1): ZOH step, batched rollout, inverse map."""
+"""Tests of the double-integrator plant (docs/model.md §1): ZOH step, batched rollout, inverse map."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from uav_formation_env.core.dynamics import GRAVITY, inverse_map, rollout, zoh_i
 
 
 def theta_matrix(v: np.ndarray) -> np.ndarray:
-    """Θ of SPEC §1.2 built independently of the module, for one velocity (3,)."""
+    """Θ of docs/model.md §1.2 built independently of the module, for one velocity (3,)."""
     speed = float(np.linalg.norm(v))
     chi = math.atan2(v[1], v[0])
     gamma = math.asin(v[2] / speed)

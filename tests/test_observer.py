@@ -1,10 +1,10 @@
-"""Tests of the NFTSMO disturbance observer (SPEC §3) in a plant + observer closed loop.
+"""Tests of the NFTSMO disturbance observer (docs/model.md §3) in a plant + observer closed loop.
 
 The loop is written here as in a simulator: per control step draw d, u = compensation
 (+ command), a = u + d, run the observer over the tick velocities of the step, then advance the
 plant by zoh_step.
 
-Measured with the default gains, 5 UAVs, paper disturbance, seed 7, 200 s (SPEC §3.2-3.4 say
+Measured with the default gains, 5 UAVs, paper disturbance, seed 7, 200 s (docs/model.md §3.2-3.4 say
 ≈ 0.010 m/s^2 and 0.09 m/s):
   rms(d_hat + s0 - d), t > 10 s            ≈ 0.0097 m/s^2  (seeds 0-5: 0.0096-0.0097)
   rms(d_hat - d) (estimate_without_s0)     ≈ 0.029 m/s^2   (seeds 0-5: 0.027-0.036)
@@ -163,13 +163,13 @@ def test_estimate_without_s0_is_worse(d_paper: np.ndarray, default_run) -> None:
     est_lit, _ = closed_loop(d_paper, literal, "minus")
     err_default = rms((estimates - d_paper)[SETTLED])
     err_literal = rms((est_lit - d_paper)[SETTLED])
-    # SPEC §3.2: rms(d_hat - d) ≈ 0.02-0.08 vs ≈ 0.010; measured 0.029 vs 0.0097
+    # docs/model.md §3.2: rms(d_hat - d) ≈ 0.02-0.08 vs ≈ 0.010; measured 0.029 vs 0.0097
     assert 0.015 <= err_literal <= 0.08
     assert err_literal > 2.0 * err_default
 
 
 def test_one_substep_is_much_worse(d_paper: np.ndarray, default_run) -> None:
-    """SPEC §3.3: h = dt (1 tick per step) diverges or chatters. Measured: non-finite after 70-90
+    """docs/model.md §3.3: h = dt (1 tick per step) diverges or chatters. Measured: non-finite after 70-90
     steps (seeds 0-7); rms over the first 50 steps ≈ 0.37 m/s^2 (seed 7) vs ≈ 0.01."""
     estimates, _ = default_run
     err_default = rms((estimates - d_paper)[SETTLED])
@@ -264,7 +264,7 @@ def test_observer_single_tick_by_hand() -> None:
 def reference_observer_step(
     state: ObserverState, v_ticks: np.ndarray, u: np.ndarray, h: float, c: ObserverConfig
 ) -> ObserverState:
-    """SPEC §3.3 written literally (generic powers, no shortcuts), for comparison."""
+    """docs/model.md §3.3 written literally (generic powers, no shortcuts), for comparison."""
 
     def sig(x: np.ndarray, p: float) -> np.ndarray:
         return np.abs(x) ** p * np.sign(x)
@@ -300,7 +300,7 @@ def reference_observer_step(
     ids=["default", "generic", "lambda2=1.7", "literal", "rho=0"],
 )
 def test_observer_step_matches_literal_spec(config: ObserverConfig) -> None:
-    """observer_step equals SPEC §3.3 written literally, over one 20-tick step of random data
+    """observer_step equals docs/model.md §3.3 written literally, over one 20-tick step of random data
     (the module has a shortcut for λ1 = 2, λ2 = 1.5; this covers it and the generic path)."""
     rng = np.random.default_rng(5)
     shape = (4, N_UAV, 3)

@@ -1,4 +1,4 @@
-"""Behaviour of the batched minimisers (PIO, LFPIO, PSO) and of the Lévy step (SPEC §6).
+"""Behaviour of the batched minimisers (PIO, LFPIO, PSO) and of the Lévy step (docs/model.md §6).
 
 Convergence tolerances were measured, not guessed (40 seeds x 16 problems each, x0 uniform in the
 box [-5, 5], optimum uniform in [-2, 2]); the thresholds below sit about 2x above the worst batch

@@ -41,7 +41,7 @@ def test_table2_has_four_variants_with_mean_and_std(quick_run):
         assert ((values >= 0) & (values <= 100)).all()  # 100 steps
         assert float(row["mean"]) == pytest.approx(values.mean(), abs=0.01)
         assert all(float(row[f"{c}_std"]) >= 0 for c in [*uavs, "mean"])
-    # without the observer every step triggers (SPEC §8 / Table 2)
+    # without the observer every step triggers (docs/model.md §8 / Table 2)
     assert float(rows[0]["mean"]) == 100 and float(rows[1]["mean"]) == 100
 
 

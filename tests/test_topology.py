@@ -1,4 +1,4 @@
-"""Obstacle avoidance with topology reconstruction (SPEC §7) on constructed geometries.
+"""Obstacle avoidance with topology reconstruction (docs/model.md §7) on constructed geometries.
 
 Unless a test says otherwise: one obstacle at the origin, radius 30 m, so R_s = 40 m and
 d^o = 70 m; t = 10 s, so the preset velocity is (20, 0, 0) and ê = +x, n̂ = +y.
@@ -232,7 +232,7 @@ def test_guide_is_most_demanding_member_ahead_not_innermost():
     ("leader_lat", "deadband", "case", "leader_side"),
     [
         (-1.0, 2.5, 1, 1),  # on the line: joins the others, no split (deviations §6)
-        (-1.0, 0.0, 2, -1),  # SPEC's sign rule splits it off alone
+        (-1.0, 0.0, 2, -1),  # the sign rule of docs/model.md splits it off alone
         (-3.0, 2.5, 2, -1),  # outside the band: a real side
         (1.0, 2.5, 1, 1),  # already on the others' side
     ],

@@ -1,11 +1,11 @@
 """Scenario configuration: frozen, typed, validated dataclasses.
 
 Every number the simulation uses lives here, with its unit. The defaults are the paper's scenario
-(SPEC.md §8 and §9b). A scenario is validated when it is built: impossible values raise
+(docs/model.md §8 and §9b). A scenario is validated when it is built: impossible values raise
 ``ValueError`` naming the field and the rule broken. Loading from a dict or YAML file (see
 :mod:`uav_formation_env.config_io`) rejects unknown keys by name.
 
-The flags marked *literal* switch on the paper's literal (and, per SPEC.md, inconsistent) readings;
+The flags marked *literal* switch on the paper's literal (and, per docs/model.md, inconsistent) readings;
 they are off by default.
 """
 
@@ -46,7 +46,7 @@ def _vec(value: tuple, length: int, field_name: str) -> None:
 
 @dataclass(frozen=True)
 class DynamicsConfig:
-    """Double-integrator plant (SPEC §1)."""
+    """Double-integrator plant (docs/model.md §1)."""
 
     dt: float = 0.2  # control step δ [s]
     u_max: float = 5.0  # per-axis bound on the applied acceleration [m/s^2]
@@ -66,7 +66,7 @@ class DynamicsConfig:
 
 @dataclass(frozen=True)
 class DisturbanceConfig:
-    """External disturbance in the acceleration channel (SPEC §2).
+    """External disturbance in the acceleration channel (docs/model.md §2).
 
     The total disturbance is the sum of the eq. 21 part (``model``), a constant ``wind`` and a
     first-order Gauss-Markov gust (``gust_std`` > 0 switches it on).
@@ -97,7 +97,7 @@ class DisturbanceConfig:
 
 @dataclass(frozen=True)
 class ObserverConfig:
-    """NFTSMO gains (SPEC §3). Diagonal gains are the same on every axis."""
+    """NFTSMO gains (docs/model.md §3). Diagonal gains are the same on every axis."""
 
     enabled: bool = True  # compensate with u_d = -(d_hat + s0)
     substeps: int = 20  # inner observer ticks per control step (h = dt / substeps)
@@ -256,7 +256,7 @@ PAPER_OBSTACLES = (ObstacleConfig((300.0, 0.0)), ObstacleConfig((1050.0, 400.0))
 
 @dataclass(frozen=True)
 class AvoidanceConfig:
-    """Obstacles and the topology-reconstruction rules (SPEC §7)."""
+    """Obstacles and the topology-reconstruction rules (docs/model.md §7)."""
 
     obstacles: tuple[ObstacleConfig, ...] = PAPER_OBSTACLES
     safety_margin: float = 10.0  # R_s = radius + margin [m]
@@ -264,7 +264,7 @@ class AvoidanceConfig:
     reference_speed: str = "preset"  # "preset": |v^d| of the schedule; "current": |v_guide|
     min_reference_speed: float = 15.0  # floor of the "current" option [m/s]
     # UAVs this close to an obstacle's centre line join the other side's group if that avoids a
-    # split (docs/deviations.md §6); 0 is SPEC's sign rule [m]
+    # split (docs/deviations.md §6); 0 is the sign rule of docs/model.md [m]
     split_deadband: float = 5.0
 
     def __post_init__(self) -> None:
@@ -301,7 +301,7 @@ class AvoidanceConfig:
 
 @dataclass(frozen=True)
 class CostConfig:
-    """Weights and horizon of the game cost J_i (eq. 6, SPEC §4).
+    """Weights and horizon of the game cost J_i (eq. 6, docs/model.md §4).
 
     ``separation`` and ``separation_distance`` add a term the paper does not have (see
     docs/deviations.md): ``s Σ_{j≠i} max(0, d_s - ||p_i - p_j||)²`` over every other UAV (sensed,
@@ -358,7 +358,7 @@ class ScheduleConfig:
 
 @dataclass(frozen=True)
 class InitialStateConfig:
-    """Initial-state distribution: positions uniform in a box, one common velocity (SPEC §8).
+    """Initial-state distribution: positions uniform in a box, one common velocity (docs/model.md §8).
 
     Positions are drawn uniformly in the box and redrawn (only the UAVs too close to another)
     until every pair is at least ``min_spacing`` apart, so no episode starts in a collision. A
@@ -434,7 +434,7 @@ class CollisionConfig:
 
 @dataclass(frozen=True)
 class Scenario:
-    """A whole scenario. The defaults are the paper's (SPEC §8)."""
+    """A whole scenario. The defaults are the paper's (docs/model.md §8)."""
 
     name: str = "paper"
     duration: float = 200.0  # episode length [s]

@@ -156,7 +156,7 @@ def save_scenario(scenario: Scenario, path: str | Path) -> None:
 
 
 def paper_scenario() -> Scenario:
-    """The paper's scenario (SPEC §8): 5 UAVs, V formation, two obstacles, 200 s."""
+    """The paper's scenario (docs/model.md §8): 5 UAVs, V formation, two obstacles, 200 s."""
     return Scenario()
 
 

@@ -6,7 +6,7 @@ composes the pure core functions; it holds no formula of its own. Each copy has 
 :data:`NOISE_BLOCK` steps, so copy ``b`` of a batch reproduces a one-copy simulation seeded alike
 bit for bit, whatever B is and whenever other copies reset.
 
-Order of one control step (SPEC §1.4, §3.3, §3.4, §7):
+Order of one control step (docs/model.md §1.4, §3.3, §3.4, §7):
 
 1. ``u_n`` clipped to ±u_max; ``u_d = -(d_hat + s0)`` if the observer is on, else 0;
    applied ``u = clip(u_n + u_d, ±u_max)``.

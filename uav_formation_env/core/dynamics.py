@@ -1,4 +1,4 @@
-"""Double-integrator UAV dynamics (SPEC §1): the one step used by the plant and by MPC prediction.
+"""Double-integrator UAV dynamics (docs/model.md §1): the one step used by the plant and by MPC prediction.
 
 State per UAV ``z = [p; v]`` with shape ``(..., 6)`` [m, m/s], z up. The acceleration ``a`` [m/s^2]
 is held over the step (zero-order hold), which makes the step exact:
@@ -6,7 +6,7 @@ is held over the step (zero-order hold), which makes the step exact:
     p+ = p + v dt + ½ a dt²,    v+ = v + a dt.
 
 The plant uses ``a = u + d``; the MPC prediction uses ``a = u_n`` (disturbance-free model,
-SPEC §3.4).
+docs/model.md §3.4).
 """
 
 from __future__ import annotations
@@ -83,7 +83,7 @@ def rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ForceInputs:
-    """Physical inputs behind an acceleration command (SPEC §1.3), for reporting."""
+    """Physical inputs behind an acceleration command (docs/model.md §1.3), for reporting."""
 
     thrust: np.ndarray  # T [N]
     lift: np.ndarray  # L [N]

@@ -1,8 +1,8 @@
-"""Non-singular fast terminal sliding-mode disturbance observer, NFTSMO (SPEC §3).
+"""Non-singular fast terminal sliding-mode disturbance observer, NFTSMO (docs/model.md §3).
 
 The 6-dimensional observer of eq. 10 splits into independent scalar channels; the position channels
 carry no disturbance, so three scalar observers run on the velocity, ``e = v - v_hat``. Per inner
-tick of length ``h`` (finite-difference form, SPEC §3.3), elementwise:
+tick of length ``h`` (finite-difference form, docs/model.md §3.3), elementwise:
 
     e = v - v_hat;   e' = (e - e_prev) / h
     s = e + Π1 sig^λ1(e) + Π2 sig^λ2(e')
@@ -12,7 +12,7 @@ tick of length ``h`` (finite-difference form, SPEC §3.3), elementwise:
 
 ``sig^a(x) = |x|^a sign(x)``. The disturbance estimate is the total injection ``d_hat + s0``
 (``estimate_without_s0`` uses ``d_hat`` alone) and the compensation is ``u_d = -estimate``
-(SPEC §3.4: the paper's ``+B⁺ d_hat`` doubles the disturbance).
+(docs/model.md §3.4: the paper's ``+B⁺ d_hat`` doubles the disturbance).
 """
 
 from __future__ import annotations

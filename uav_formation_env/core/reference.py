@@ -1,6 +1,6 @@
 """The preset velocity schedule (eq. 23) and the reference preview over the MPC horizon.
 
-See SPEC §4.3 for the preview: the schedule at t + kδ, or the current reference held while avoiding.
+See docs/model.md §4.3 for the preview: the schedule at t + kδ, or the current reference held while avoiding.
 """
 
 from __future__ import annotations
@@ -115,7 +115,7 @@ def reference_preview(
     reference_now: np.ndarray,
     avoiding: np.ndarray,
 ) -> np.ndarray:
-    """Desired velocity v^d(t + kδ) over the prediction horizon (SPEC §4.3).
+    """Desired velocity v^d(t + kδ) over the prediction horizon (docs/model.md §4.3).
 
     Args:
         schedule: preset velocity (eq. 23).

@@ -216,7 +216,7 @@ def policy_plans(
 
     A policy that broadcasts plans (the DMPC's ``plans``) gives them as they are. Any other
     policy's plan is its action ``a · u_max`` held over the horizon, clipped to the UAV's box
-    ``|u_n| <= u_max - |estimate|`` (SPEC §1.5: the part of the actuator range the plant leaves
+    ``|u_n| <= u_max - |estimate|`` (docs/model.md §1.5: the part of the actuator range the plant leaves
     to the formation input while the observer compensates).
 
     Returns:

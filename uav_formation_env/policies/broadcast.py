@@ -130,7 +130,7 @@ class HorizonProblems:
         cost: J_i of candidates (B, N, P, H, 3) -> (B, N, P), the one definition of
             :mod:`uav_formation_env.core.cost`.
         half_width: (B, N, 3) the search box ``|u_n,c| <= u_max - |u_d,c|`` with
-            ``u_d = -estimate`` (SPEC §1.5), at least 0 [m/s^2].
+            ``u_d = -estimate`` (docs/model.md §1.5), at least 0 [m/s^2].
     """
 
     cost: HorizonCost
@@ -146,7 +146,7 @@ def horizon_problems(
     (:func:`~uav_formation_env.core.cost.superposed_rollout`) of the senders' observed states under
     their plans; every other UAV is rolled out with zero inputs (its positions enter only the
     separation term). The reference preview is the preset schedule at t + kδ, or the UAV's current
-    reference held over the horizon while its observation says "avoiding" (SPEC §4.3).
+    reference held over the horizon while its observation says "avoiding" (docs/model.md §4.3).
 
     Args:
         decoded: observations (B, N, dim), decoded.

@@ -1,9 +1,9 @@
-"""Lévy-flight steps by Mantegna's algorithm (SPEC §6.3, eq. 19 of the paper).
+"""Lévy-flight steps by Mantegna's algorithm (docs/model.md §6.3, eq. 19 of the paper).
 
 A step is ``s = mu / |nu|**(1/beta)`` with ``mu ~ N(0, sigma_mu**2)`` and ``nu ~ N(0, 1)``, drawn
 independently per component. For large ``|s|`` the ratio has a power-law tail,
 ``P(|s| > x) ~ x**(-beta)``, which gives LFPIO its occasional long jumps. The paper reuses δ for
-the exponent and gives no value; SPEC renames it β and fixes β = 1.5 (σ_μ = 0.696575).
+the exponent and gives no value; docs/model.md renames it β and fixes β = 1.5 (σ_μ = 0.696575).
 
 All randomness comes from the ``numpy.random.Generator`` passed in.
 """

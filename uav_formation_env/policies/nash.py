@@ -1,7 +1,7 @@
 """Nash gap of a plan profile and Nash equilibria of the horizon game by iterated best response.
 
-The game at time t (SPEC §5, eq. 7): player i chooses its input sequence U_i in its box
-``|u_n,c| <= u_max - |u_d,c|`` (SPEC §1.5, ``u_d = -estimate``); its cost is J_i of
+The game at time t (docs/model.md §5, eq. 7): player i chooses its input sequence U_i in its box
+``|u_n,c| <= u_max - |u_d,c|`` (docs/model.md §1.5, ``u_d = -estimate``); its cost is J_i of
 :mod:`uav_formation_env.core.cost`, built from its own observation against the plans of the UAVs it
 receives from (``h_ij = 1`` in its observation; every other UAV is predicted with zero inputs and
 enters J_i only through the separation term). A profile ``(U_1, ..., U_N)`` is a Nash equilibrium

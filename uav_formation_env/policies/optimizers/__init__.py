@@ -1,4 +1,4 @@
-"""Batched derivative-free minimisers: PIO, LFPIO (SPEC §6) and a PSO baseline.
+"""Batched derivative-free minimisers: PIO, LFPIO (docs/model.md §6) and a PSO baseline.
 
 The optimisers know nothing about UAVs. They minimise a vectorised cost over a box, for a batch of
 independent problems at once, in the evosax / pymoo style: the whole population of every problem
@@ -10,7 +10,7 @@ solves ``batch`` problems (``(M,)`` for M UAVs), so ``x0`` has shape ``(*batch, 
 cost is called on populations ``(*batch, P, *dims)`` returning ``(*batch, P)``. Internally ``dims``
 is flattened to ``n`` components.
 
-Conventions shared by all three methods (SPEC §6):
+Conventions shared by all three methods (docs/model.md §6):
 
 - Costs are assumed to be ``J >= 0`` (the paper's performance index is a sum of squares). Fitness
   is ``f = 1 / (max(J, 0) + 1e-12)``; it only weights the LFPIO/PIO centre and orders the PIO

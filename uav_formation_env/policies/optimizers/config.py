@@ -1,4 +1,4 @@
-"""Optimiser configurations (SPEC §6, Table 1), their validation, and the result type."""
+"""Optimiser configurations (docs/model.md §6, Table 1), their validation, and the result type."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-FITNESS_EPS = 1e-12  # ε of f = 1/(J + ε), SPEC §9b
+FITNESS_EPS = 1e-12  # ε of f = 1/(J + ε), docs/model.md §9b
 
 CostFn = Callable[[np.ndarray], np.ndarray]
 
@@ -38,9 +38,9 @@ def _flag(value: object, field_name: str) -> None:
 
 @dataclass(frozen=True)
 class PIOConfig:
-    """Pigeon-inspired optimisation (SPEC §6.1; Table 1: Nc1max = 25, Nc2max = 5, R = 0.1)."""
+    """Pigeon-inspired optimisation (docs/model.md §6.1; Table 1: Nc1max = 25, Nc2max = 5, R = 0.1)."""
 
-    n_pigeons: int = 30  # Np [proposed, SPEC §6]
+    n_pigeons: int = 30  # Np [proposed, docs/model.md §6]
     map_compass_iters: int = 25  # Nc1max
     landmark_iters: int = 5  # Nc2max; survivors halve each iteration, ceil(Np/2)
     map_compass_factor: float = 0.1  # R in V e^{-R l}
@@ -58,7 +58,7 @@ class PIOConfig:
 
 @dataclass(frozen=True)
 class LFPIOConfig:
-    """Lévy-flight PIO (SPEC §6.2; Table 1: Ncmax = 30, R = 0.1, r1 = 0.01)."""
+    """Lévy-flight PIO (docs/model.md §6.2; Table 1: Ncmax = 30, R = 0.1, r1 = 0.01)."""
 
     n_pigeons: int = 30  # Np, no halving in LFPIO
     iters: int = 30  # Ncmax

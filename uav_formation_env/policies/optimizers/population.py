@@ -10,7 +10,7 @@ from uav_formation_env.policies.optimizers.config import FITNESS_EPS, CostFn, Op
 
 
 def fitness(cost: np.ndarray) -> np.ndarray:
-    """Fitness ``f = 1 / (max(J, 0) + 1e-12)``; ``+inf`` cost gives 0 (SPEC §6)."""
+    """Fitness ``f = 1 / (max(J, 0) + 1e-12)``; ``+inf`` cost gives 0 (docs/model.md §6)."""
     return 1.0 / (np.maximum(cost, 0.0) + FITNESS_EPS)
 
 
