@@ -1,6 +1,11 @@
-"""TopViewRenderer and write_gif: frame format, content, trails, edges, determinism, GIF output."""
+"""TopViewRenderer, write_gif and render_episode: frame format, content, trails, edges,
+determinism, GIF output, one policy's episode as a GIF or MP4."""
 
 from __future__ import annotations
+
+import dataclasses
+import re
+import sys
 
 import numpy as np
 import pytest
@@ -8,12 +13,21 @@ from matplotlib.colors import to_rgb
 from PIL import Image, ImageSequence
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.config_io import with_overrides
+from uav_formation_env.envs.parallel import observations_of
+from uav_formation_env.evaluation import make_policy, run_episodes
 from uav_formation_env.render import (
     COLLISION_COLOR,
     OBSTACLE_COLOR,
     TopViewRenderer,
     group_edges,
+    render_episode,
     write_gif,
+)
+from uav_formation_env.render.episode import (
+    VIDEO_EXTRA_MESSAGE,
+    AdjacencyRecorder,
+    episode_frames,
 )
 from uav_formation_env.sim import FormationSim
 
@@ -224,3 +238,101 @@ def test_write_gif_rejects_bad_frames(tmp_path):
         write_gif([good, np.zeros((8, 9, 3), dtype=np.uint8)], tmp_path / "b.gif")
     with pytest.raises(ValueError, match="dtype"):
         write_gif([good.astype(float)], tmp_path / "c.gif")
+
+
+def test_write_gif_takes_a_generator(tmp_path):
+    frames = (np.full((8, 8, 3), 40 * k, dtype=np.uint8) for k in range(3))
+    with Image.open(write_gif(frames, tmp_path / "g.gif")) as gif:
+        assert gif.n_frames == 3
+
+
+# ------------------------------------------------------------------ render_episode
+SHORT = with_overrides(SCENARIO, {"duration": 12.0})  # 60 steps; seed 0 splits at O1 at 9.8 s
+
+
+@pytest.mark.parametrize("every", [2, 7])
+def test_render_episode_writes_a_gif_with_one_frame_every_k_steps(tmp_path, every):
+    out = tmp_path / "new" / "folder" / "episode.gif"  # the folder is created
+    policy = make_policy("heuristic", SHORT)
+    path = render_episode(SHORT, policy, 0, out, fps=5, every=every, progress=False)
+    assert path == out
+    with Image.open(path) as gif:
+        assert gif.format == "GIF"
+        assert gif.size == (640, 640)
+        assert gif.n_frames == len(range(0, SHORT.n_steps + 1, every))  # 31 or 9
+        assert gif.info["duration"] == 200  # 5 fps
+
+
+def test_render_episode_frames_are_the_renderer_on_the_simulated_states():
+    """Frame k is TopViewRenderer on the state after k steps: positions, references, groups,
+    the observed communication graph (split at O1 in the last frames) and collisions."""
+    policy = make_policy("heuristic", SHORT)
+    recorder = AdjacencyRecorder(policy, N)
+    batch = run_episodes(SHORT, recorder, [0])
+    adjacency = recorder.adjacency(batch.n_steps + 1)
+    # a 60 m view: the UAVs far enough apart in pixels for the edges to show between markers
+    frames = list(
+        episode_frames(
+            batch, adjacency, 1, renderer=TopViewRenderer(SHORT, 160, 160, view_span=60.0)
+        )
+    )
+
+    sim = FormationSim(SHORT)
+    result = sim.reset(seed=0)
+    reference = TopViewRenderer(SHORT, 160, 160, view_span=60.0)
+    expected = [reference.frame_from_step(result)]
+    for _ in range(SHORT.n_steps):
+        actions = policy.act_batch(observations_of(sim, result))
+        result = sim.step(np.clip(actions, -1.0, 1.0) * sim.u_max)
+        expected.append(reference.frame_from_step(result))
+    assert len(frames) == len(expected) == 61
+    # the episode ends split at O1: the split graph, not H0, is drawn in the last frames
+    assert result.groups[0].max() == 1
+    assert not np.array_equal(result.adjacency[0], ADJACENCY)
+    for k, (frame, want) in enumerate(zip(frames, expected)):
+        assert np.array_equal(frame, want), k
+
+    # no collision in this episode: flag UAV3 after step 21, the ring shows at state 21 only
+    assert not batch.collision.any()
+    collision = batch.collision.copy()
+    collision[20, 0, 2] = True
+    flagged = dataclasses.replace(batch, collision=collision)
+    renderer = TopViewRenderer(SHORT, 160, 160, trail_length=0)
+    red = [
+        count_color(f, COLLISION_COLOR)
+        for f in episode_frames(flagged, adjacency, 1, False, renderer)
+    ]
+    assert [k for k, pixels in enumerate(red) if pixels > 20] == [21]
+
+
+def test_render_episode_rejects_bad_arguments(tmp_path):
+    policy = make_policy("heuristic", SHORT)
+    for name in ("episode.png", "episode", "episode.gif.txt"):
+        with pytest.raises(ValueError, match=r"^out must end in \.gif or \.mp4"):
+            render_episode(SHORT, policy, 0, tmp_path / name, progress=False)
+    with pytest.raises(ValueError, match="^fps"):
+        render_episode(SHORT, policy, 0, tmp_path / "a.gif", fps=0, progress=False)
+    for every in (0, -1, 1.5):
+        with pytest.raises(ValueError, match="^every"):
+            render_episode(SHORT, policy, 0, tmp_path / "a.gif", every=every, progress=False)
+    assert not list(tmp_path.iterdir())
+
+
+def test_render_episode_mp4_without_imageio_ffmpeg_names_the_extra(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # `import imageio_ffmpeg` fails
+    policy = make_policy("heuristic", SHORT)
+    with pytest.raises(RuntimeError, match=re.escape(VIDEO_EXTRA_MESSAGE)) as error:
+        render_episode(SHORT, policy, 0, tmp_path / "episode.mp4", progress=False)
+    assert str(error.value) == (
+        "writing .mp4 needs the [video] extra: pip install 'uav-formation-env[video]'"
+    )
+    assert not (tmp_path / "episode.mp4").exists()
+
+
+def test_render_episode_mp4(tmp_path):
+    ffmpeg = pytest.importorskip("imageio_ffmpeg")  # the [video] extra
+    policy = make_policy("heuristic", SHORT)
+    path = render_episode(SHORT, policy, 0, tmp_path / "episode.mp4", every=2, progress=False)
+    frames, seconds = ffmpeg.count_frames_and_secs(str(path))
+    assert frames == 31
+    assert seconds == pytest.approx(3.1)

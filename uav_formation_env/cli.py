@@ -187,7 +187,7 @@ def _render(args: argparse.Namespace) -> int:
     from uav_formation_env.evaluation import make_policy
     from uav_formation_env.render import render_episode
 
-    scenario = _scenario_for(args)
+    scenario = _scenario_for(args)  # with --duration: the policy sees the episode's length
     policy = make_policy(args.policy, scenario, algo=args.algo)
     out = Path(args.out)
     if out.is_dir():

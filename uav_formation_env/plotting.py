@@ -14,12 +14,15 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.patches import Circle
+from matplotlib.gridspec import SubplotSpec
+from matplotlib.patches import Circle, Rectangle
 
 from uav_formation_env.config import Scenario
 
 DPI = 120
 VARIANT_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown")
+ZOOM_REACH = 2.0  # an obstacle's zoom panel spans +-ZOOM_REACH detection radii around its centre
+ZOOM_LABEL = "zoom O{}"  # Axes.get_label() of the zoom panel of obstacle O{1, 2, ...}
 
 
 def _figure(rows: int = 1, cols: int = 1, size: tuple[float, float] = (7, 6), **kwargs):
@@ -30,7 +33,8 @@ def _figure(rows: int = 1, cols: int = 1, size: tuple[float, float] = (7, 6), **
 
 
 def _save(fig: Figure, path: str | Path | None) -> Figure:
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=DPI)
     return fig
@@ -52,10 +56,16 @@ def draw_obstacles(ax: Axes, scenario: Scenario) -> None:
         )
 
 
+def _uav_color(i: int) -> str:
+    return f"C{i % 10}"
+
+
 def _draw_paths(ax: Axes, positions: np.ndarray, scenario: Scenario, legend: bool = True) -> None:
     draw_obstacles(ax, scenario)
     for i in range(positions.shape[1]):
-        ax.plot(positions[:, i, 0], positions[:, i, 1], lw=1.0, label=f"UAV{i + 1}")
+        ax.plot(
+            positions[:, i, 0], positions[:, i, 1], lw=1.0, color=_uav_color(i), label=f"UAV{i + 1}"
+        )
         ax.plot(positions[0, i, 0], positions[0, i, 1], "o", ms=3, color="k")
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
@@ -65,8 +75,151 @@ def _draw_paths(ax: Axes, positions: np.ndarray, scenario: Scenario, legend: boo
         ax.legend(loc="best", fontsize=7)
 
 
+def detection_radius(scenario: Scenario, index: int) -> float:
+    """d^o of obstacle ``index``: the distance from its centre at which avoidance starts [m]."""
+    obstacle = scenario.avoidance.obstacles[index]
+    return obstacle.radius + scenario.avoidance.detection_margin
+
+
+def zoom_half_width(scenario: Scenario, index: int) -> float:
+    """Half the side of obstacle ``index``'s zoom window: :data:`ZOOM_REACH` x d^o [m]."""
+    return ZOOM_REACH * detection_radius(scenario, index)
+
+
+def draw_obstacle_zoom(ax: Axes, positions: np.ndarray, scenario: Scenario, index: int) -> None:
+    """Zoom panel of one obstacle: the paths within :func:`zoom_half_width` of its centre.
+
+    Draws the obstacle disc, its safety circle R_s (dashed) and its detection circle d^o
+    (dotted), every UAV's path in the colours of the main panel, and in the title the closest
+    approach of any UAV to the centre (``closest``). The axis gets the label
+    ``ZOOM_LABEL.format(index + 1)``.
+
+    Args:
+        ax: the panel.
+        positions: (T, N, 3) positions [m].
+        scenario: for the obstacles and the margins.
+        index: obstacle index (0-based).
+    """
+    avoidance = scenario.avoidance
+    obstacle = avoidance.obstacles[index]
+    cx, cy = obstacle.center
+    half = zoom_half_width(scenario, index)
+    draw_obstacles(ax, scenario)
+    ax.add_patch(
+        Circle(
+            obstacle.center,
+            detection_radius(scenario, index),
+            fill=False,
+            linestyle=":",
+            lw=0.8,
+            color="0.55",
+        )
+    )
+    for i in range(positions.shape[1]):
+        ax.plot(positions[:, i, 0], positions[:, i, 1], lw=1.0, color=_uav_color(i))
+    title = f"O{index + 1} zoom (±{half:g} m)"
+    distance = np.hypot(positions[..., 0] - cx, positions[..., 1] - cy)
+    if np.isfinite(distance).any():
+        closest, r_safe = np.nanmin(distance), avoidance.safety_radius(obstacle)
+        title += f"\nclosest {closest:.1f} m, R_s {r_safe:g} m"
+    ax.set_xlim(cx - half, cx + half)
+    ax.set_ylim(cy - half, cy + half)
+    ax.set_aspect("equal")
+    ax.tick_params(labelsize=6.5)
+    ax.grid(alpha=0.3)
+    ax.set_title(title, fontsize=7.5)
+    ax.set_label(ZOOM_LABEL.format(index + 1))
+
+
+def _mark_zoom_windows(ax: Axes, scenario: Scenario) -> None:
+    """Outline each obstacle's zoom window on the main panel, named O1, O2, ..."""
+    for o, obstacle in enumerate(scenario.avoidance.obstacles):
+        half = zoom_half_width(scenario, o)
+        cx, cy = obstacle.center
+        ax.add_patch(
+            Rectangle((cx - half, cy - half), 2 * half, 2 * half, fill=False, lw=0.6, color="0.6")
+        )
+        ax.text(cx - half, cy + half, f" O{o + 1}", fontsize=7, color="0.4", va="bottom")
+
+
+def zoom_axes(fig: Figure) -> list[Axes]:
+    """The obstacle zoom panels of a figure (axes labelled like :data:`ZOOM_LABEL`)."""
+    prefix = ZOOM_LABEL.split("{")[0]
+    return [ax for ax in fig.axes if ax.get_label().startswith(prefix)]
+
+
+ZOOMS_PER_ROW = 3  # zoom panels per row under a main panel (4 from 4 obstacles on)
+
+
+def _zoom_grid(n_obstacles: int) -> tuple[int, int]:
+    """(rows, slots per row) of the zoom panels under a main panel."""
+    if n_obstacles == 0:
+        return 0, 0
+    cols = ZOOMS_PER_ROW if n_obstacles <= ZOOMS_PER_ROW else ZOOMS_PER_ROW + 1
+    return int(np.ceil(n_obstacles / cols)), cols
+
+
+def _trajectory_cell(
+    fig: Figure,
+    spec: SubplotSpec,
+    positions: np.ndarray,
+    scenario: Scenario,
+    title: str,
+    legend: bool,
+    zoom: bool,
+    main_height: float,
+    zoom_height: float,
+) -> Axes:
+    """A main top-view panel and, with ``zoom``, one zoom panel per obstacle under it.
+
+    The zoom panels fill rows of :func:`_zoom_grid` slots; a row with fewer panels is centred.
+    """
+    n_obs = len(scenario.avoidance.obstacles) if zoom else 0
+    zoom_rows, slots = _zoom_grid(n_obs)
+    cell = spec.subgridspec(
+        1 + zoom_rows, 1, height_ratios=[main_height] + [zoom_height] * zoom_rows
+    )
+    ax = fig.add_subplot(cell[0, 0])
+    _draw_paths(ax, positions, scenario, legend=legend)
+    if n_obs:
+        _mark_zoom_windows(ax, scenario)
+    ax.set_title(title)
+    for row in range(zoom_rows):
+        first = row * slots
+        count = min(slots, n_obs - first)
+        pad = (slots - count) / 2.0  # empty slots, half each side
+        ratios = ([pad] if pad else []) + [1.0] * count + ([pad] if pad else [])
+        line = cell[1 + row, 0].subgridspec(1, len(ratios), width_ratios=ratios)
+        for k in range(count):
+            zoom_ax = fig.add_subplot(line[0, k + (1 if pad else 0)])
+            draw_obstacle_zoom(zoom_ax, positions, scenario, first + k)
+    return ax
+
+
+def _main_height(
+    positions: Sequence[np.ndarray], scenario: Scenario, width: float, zoom: bool
+) -> float:
+    """Height [in] of a main top-view panel ``width`` inches wide that fits the drawn extent
+    (paths, obstacles, zoom windows) at equal aspect, with room for the title and labels."""
+    xy = [p[..., :2].reshape(-1, 2) for p in positions]
+    for o, obstacle in enumerate(scenario.avoidance.obstacles):
+        reach = zoom_half_width(scenario, o) if zoom else scenario.avoidance.safety_radius(obstacle)
+        xy.append(np.asarray(obstacle.center) + reach * np.array([[-1.0, -1.0], [1.0, 1.0]]))
+    xy = np.concatenate(xy)
+    xy = xy[np.isfinite(xy).all(axis=1)]
+    if len(xy) == 0:
+        return 5.0
+    dx, dy = np.ptp(xy, axis=0)
+    aspect = dy / dx if dx > 0 else 1.0
+    return float(np.clip((width - 1.0) * aspect * 1.1 + 1.1, 2.5, 7.0))
+
+
 def plot_trajectories(
-    positions: np.ndarray, scenario: Scenario, path: str | Path | None = None, title: str = ""
+    positions: np.ndarray,
+    scenario: Scenario,
+    path: str | Path | None = None,
+    title: str = "",
+    zoom: bool = False,
 ) -> Figure:
     """Top view of every UAV's path.
 
@@ -75,11 +228,24 @@ def plot_trajectories(
         scenario: for the obstacles.
         path: write a PNG there if given.
         title: axis title.
+        zoom: add one zoom panel per obstacle under the main panel (:func:`draw_obstacle_zoom`).
     """
-    fig, axes = _figure()
-    ax = axes[0, 0]
-    _draw_paths(ax, positions, scenario)
-    ax.set_title(title)
+    if not zoom:
+        fig, axes = _figure()
+        ax = axes[0, 0]
+        _draw_paths(ax, positions, scenario)
+        ax.set_title(title)
+        return _save(fig, path)
+    zoom_rows, slots = _zoom_grid(len(scenario.avoidance.obstacles))
+    width = 7.0
+    main_height = _main_height([positions], scenario, width, True)
+    zoom_height = width / max(slots, 1)
+    fig = Figure(figsize=(width, main_height + zoom_rows * zoom_height), layout="constrained")
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(1, 1)
+    _trajectory_cell(
+        fig, grid[0, 0], positions, scenario, title, True, True, main_height, zoom_height
+    )
     return _save(fig, path)
 
 
@@ -88,25 +254,46 @@ def plot_variant_trajectories(
     scenario: Scenario,
     path: str | Path | None = None,
     suptitle: str = "",
+    zoom: bool = True,
 ) -> Figure:
-    """Fig. 5: top view of the paths of each variant, one panel per variant (2 columns).
+    """Fig. 5: top view of the paths of each variant, one cell per variant (2 columns).
+
+    With ``zoom`` each cell holds, under the variant's main panel, one zoom panel per obstacle
+    (:func:`draw_obstacle_zoom`: ±:data:`ZOOM_REACH` detection radii around the centre, with the
+    obstacle and its safety circle), :data:`ZOOMS_PER_ROW` per row (one more from 4 obstacles
+    on); each zoom window is outlined on the main panel. No zoom panel without obstacles.
+    :func:`zoom_axes` finds them.
 
     Args:
         positions: label -> (T, N, 3) positions [m].
         scenario: for the obstacles.
         path: PNG path.
         suptitle: figure title.
+        zoom: draw the zoom panels.
     """
     labels = list(positions)
     cols = 2 if len(labels) > 1 else 1
     rows = int(np.ceil(len(labels) / cols))
-    fig, axes = _figure(rows, cols, size=(6.5 * cols, 5.0 * rows))
-    for k, ax in enumerate(axes.ravel()):
-        if k >= len(labels):
-            ax.set_visible(False)
-            continue
-        _draw_paths(ax, positions[labels[k]], scenario, legend=k == 0)
-        ax.set_title(f"({chr(ord('a') + k)}) {labels[k]}")
+    zoom_rows, slots = _zoom_grid(len(scenario.avoidance.obstacles) if zoom else 0)
+    width = 6.5
+    main_height = _main_height(list(positions.values()), scenario, width, zoom)
+    zoom_height = width / slots if slots else 0.0
+    height = rows * (main_height + zoom_rows * zoom_height) + (0.4 if suptitle else 0.0)
+    fig = Figure(figsize=(width * cols, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(rows, cols)
+    for k, label in enumerate(labels):
+        _trajectory_cell(
+            fig,
+            grid[k // cols, k % cols],
+            positions[label],
+            scenario,
+            f"({chr(ord('a') + k)}) {label}",
+            k == 0,
+            zoom,
+            main_height,
+            zoom_height,
+        )
     if suptitle:
         fig.suptitle(suptitle)
     return _save(fig, path)
@@ -193,7 +380,7 @@ def plot_log_cost(
     markers: Mapping[str, float] | None = None,
     path: str | Path | None = None,
     title: str = "",
-    ylabel: str = "log10 J_mean",
+    ylabel: str = "log10 of the cost averaged over UAVs [-]",
 ) -> Figure:
     """Fig. 8: log10 of the mean cost over UAVs against time, per variant.
 
@@ -203,8 +390,8 @@ def plot_log_cost(
         band: label -> (low, high) (T,) arrays shaded around the curve (e.g. min/max over seeds).
         markers: label -> time [s] of a vertical dotted line (events).
         path: PNG path.
-        title: axis title.
-        ylabel: y label.
+        title: axis title; name the quantity of ``ylabel`` in it (Fig. 8 repeats it verbatim).
+        ylabel: y label: the plotted quantity and its unit.
     """
     fig, axes = _figure(size=(10, 5))
     ax = axes[0, 0]
@@ -231,7 +418,8 @@ def plot_log_cost(
     ax.set_xlabel("t [s]")
     ax.set_ylabel(ylabel)
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    # outside the axes, right of them: clear of the curves and of the event labels at the top
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8)
     if title:
         ax.set_title(title)
     return _save(fig, path)

@@ -315,7 +315,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         if self._result is None:
             raise RuntimeError("call reset() before render()")
         if self._renderer is None:
-            from uav_formation_env.render import TopViewRenderer
+            from uav_formation_env.render.top_view import TopViewRenderer
 
             self._renderer = TopViewRenderer(self.scenario)
         r = self._result

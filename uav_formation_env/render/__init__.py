@@ -26,10 +26,22 @@ grid                      light lines at a world-fixed spacing of 1, 2 or 5 x 10
 
 The view follows the swarm: it is centred on the mean horizontal position and spans ``view_span``
 metres along the shorter image side; with ``fit_swarm`` it widens when the swarm does not fit.
+
+:func:`render_episode` (module :mod:`~uav_formation_env.render.episode`) flies one episode of a
+policy with the evaluation runner and writes these frames as a GIF, or an MP4 with the
+``[video]`` extra (``uav-formation render``).
 """
 
+from uav_formation_env.render.episode import render_episode
 from uav_formation_env.render.gif import write_gif
 from uav_formation_env.render.style import COLLISION_COLOR, OBSTACLE_COLOR, group_edges
 from uav_formation_env.render.top_view import TopViewRenderer
 
-__all__ = ["COLLISION_COLOR", "OBSTACLE_COLOR", "TopViewRenderer", "group_edges", "write_gif"]
+__all__ = [
+    "COLLISION_COLOR",
+    "OBSTACLE_COLOR",
+    "TopViewRenderer",
+    "group_edges",
+    "render_episode",
+    "write_gif",
+]

@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
-
-if TYPE_CHECKING:
-    pass
 
 DPI = 100  # figure resolution: one inch is DPI pixels [px/in]
 OBSTACLE_COLOR = "#5f7386"  # obstacle fill and safety-circle colour (opaque, not a pure grey)
@@ -65,5 +62,3 @@ def checked_array(value: Any, shape: tuple[int, ...], name: str, dtype: type = f
     if array.shape != shape:
         raise ValueError(f"{name} must have shape {shape}, got {array.shape}")
     return array
-
-

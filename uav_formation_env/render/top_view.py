@@ -33,6 +33,7 @@ from uav_formation_env.render.style import (
 if TYPE_CHECKING:
     from uav_formation_env.sim import StepResult
 
+
 class TopViewRenderer:
     """Fast, headless top-view frames of one scenario copy.
 
@@ -390,5 +391,3 @@ class TopViewRenderer:
             pad = ((0, self.height - out.shape[0]), (0, self.width - out.shape[1]), (0, 0))
             out = np.pad(out, pad, mode="edge")
         return np.array(out, dtype=np.uint8, order="C")
-
-

@@ -80,9 +80,12 @@ def write_nash_table(rows: list[dict[str, Any]], path: str | Path) -> None:
         writer.writerows(rows)
 
 
-def plot_nash_gap(batches: dict[str, EpisodeBatch], path: str | Path) -> Path:
-    """log10 of the Nash gap over time, median over UAVs and seeds (in-box plans only)."""
-    fig = Figure(figsize=(9, 4.5))
+def nash_gap_figure(batches: dict[str, EpisodeBatch]) -> Figure:
+    """Fig. 10: log10 of the Nash gap over time, median over UAVs and seeds (in-box plans only).
+
+    The legend lies outside the axes, to the right of them, so it never covers a curve.
+    """
+    fig = Figure(figsize=(11, 4.5))
     FigureCanvasAgg(fig)
     ax = fig.subplots()
     for variant, batch in batches.items():
@@ -95,9 +98,15 @@ def plot_nash_gap(batches: dict[str, EpisodeBatch], path: str | Path) -> Path:
     ax.set_ylabel("log10 Nash gap (median over UAVs, seeds)")
     ax.set_title("Distance of the plans from a Nash equilibrium of the horizon game")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    if ax.get_lines():
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+    fig.tight_layout()  # shrinks the axes to leave the legend room in the figure
+    return fig
+
+
+def plot_nash_gap(batches: dict[str, EpisodeBatch], path: str | Path) -> Path:
+    """Write :func:`nash_gap_figure` as a PNG (cropped to what is drawn, legend included)."""
+    nash_gap_figure(batches).savefig(path, dpi=120, bbox_inches="tight")
     return Path(path)
 
 
