@@ -1,10 +1,15 @@
-"""Learning curves of training runs (matplotlib, Agg backend).
+"""Figures of the baselines (matplotlib, Agg backend): learning curves and the mission comparison.
 
-Two panels over agent-timesteps, one line per run: the training episodes' mean stage cost per
-UAV-step (``-rollout/ep_rew_mean / rollout/ep_len_mean`` of ``progress.csv``, stochastic policy,
-untransformed reward; per step because divergence resets cut early episodes short) and the
-periodic evaluation's mean realised cost per UAV and episode (``evaluations.csv``, deterministic
-policy, full episodes, collisions marked). Both on a log axis: costs span decades in training.
+:func:`mission_bars`: per policy, the realised cost, the mission completion rate and the route
+error max, from the rows of :func:`uav_formation_baselines.evaluate.comparison_rows` (values read
+from ``summarise``; nothing is computed here).
+
+:func:`learning_curve`: two panels over agent-timesteps, one line per run: the training
+episodes' mean stage cost per UAV-step (``-rollout/ep_rew_mean / rollout/ep_len_mean`` of
+``progress.csv``, stochastic policy, untransformed reward; per step because divergence resets
+cut early episodes short) and the periodic evaluation's mean realised cost per UAV and episode
+(``evaluations.csv``, deterministic policy, full episodes, collisions marked). Both on a log axis:
+costs span decades in training.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import csv
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -80,6 +86,60 @@ def learning_curve(
         ax.grid(True, which="both", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
+    fig.tight_layout()
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+    return png
+
+
+def mission_bars(
+    rows: Sequence[dict[str, Any]],
+    png: str | Path,
+    threshold: float | None = None,
+    reference: str | None = None,
+) -> Path:
+    """Bar chart of the comparison: realised cost per UAV, missions completed (fraction of seeds)
+    and route error max per policy, with their 95 % CI over seeds as error bars.
+
+    Args:
+        rows: :func:`~uav_formation_baselines.evaluate.comparison_rows`.
+        png: output image.
+        threshold: the completion threshold of the route error max [m] (dashed line), if known.
+        reference: label of the reference policy (its bars are hatched).
+    """
+    labels = [str(r["policy"]) for r in rows]
+    short = [Path(label).name if "/" in label else label for label in labels]
+    x = list(range(len(rows)))
+    fig, (cost_ax, done_ax, route_ax) = plt.subplots(1, 3, figsize=(13, 4))
+    panels = (
+        (cost_ax, "realised_cost", "realised cost per UAV (Σ J_i)", True),
+        (done_ax, "completion_rate", "missions completed (fraction of seeds)", False),
+        (route_ax, "route_error_max_m", "route error max [m] (centroid vs preset route)", True),
+    )
+    for ax, key, title, log in panels:
+        values = [float(r[f"{key}_mean" if key == "realised_cost" else key]) for r in rows]
+        errors = [float(r.get(f"{key}_ci95") or 0.0) for r in rows]
+        bars = ax.bar(x, values, yerr=errors if any(errors) else None, capsize=3, color="C0")
+        for bar, label in zip(bars, labels):
+            if label == reference:
+                bar.set_hatch("//")
+                bar.set_facecolor("C2")
+        if key == "completion_rate":
+            for xi, r in zip(x, rows):
+                ax.annotate(f"{r['completed']}/{r['episodes']}", (xi, r[key]), ha="center",
+                            va="bottom", fontsize=8)  # fmt: skip
+            ax.set_ylim(0, 1.12)
+        if log and all(v > 0 for v in values):
+            ax.set_yscale("log")
+        if key == "route_error_max_m" and threshold is not None:
+            ax.axhline(threshold, ls="--", lw=1, color="red", label=f"threshold {threshold:g} m")
+            ax.legend(fontsize=8)
+        ax.set_title(title, fontsize=10)
+        ax.set_xticks(x)
+        ax.set_xticklabels(short, rotation=30, ha="right", fontsize=8)
+        ax.grid(True, axis="y", which="both", alpha=0.3)
     fig.tight_layout()
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)

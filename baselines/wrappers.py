@@ -29,8 +29,8 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvStepReturn
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import with_overrides
 from uav_formation_env.core.cost import anchored
-from uav_formation_env.envs.parallel import observations_of
 from uav_formation_env.envs.vector import FormationVecEnv
+from uav_formation_env.episode import observations_of
 from uav_formation_env.evaluation import HeuristicPolicy
 
 REWARD_TRANSFORMS = ("none", "log", "sqrt")

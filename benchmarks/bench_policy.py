@@ -24,7 +24,7 @@ import yaml
 
 from uav_formation_env.config_io import paper_scenario, with_overrides
 from uav_formation_env.core.obstacles import obstacle_distances
-from uav_formation_env.envs.parallel import observations_of
+from uav_formation_env.episode import observations_of
 from uav_formation_env.policies import optimizers
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
 from uav_formation_env.sim import FormationSim, StepResult

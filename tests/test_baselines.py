@@ -1,5 +1,6 @@
 """RL baselines: hyper-parameters, the training stack, a PPO / SAC smoke run, saving, loading
-through the package's evaluation, VecNormalize round trip, shipped models."""
+through the package's evaluation, VecNormalize round trip, shipped models, and the comparison
+table of the evaluate script (cost beside the mission metrics)."""
 
 from __future__ import annotations
 
@@ -26,7 +27,15 @@ from uav_formation_baselines.config import (  # noqa: E402
     parse_set,
     split_params,
 )
-from uav_formation_baselines.evaluate import compare, evaluate_run, run_scenario  # noqa: E402
+from uav_formation_baselines.evaluate import (  # noqa: E402
+    OUTPUT_FILES,
+    compare,
+    evaluate_run,
+    format_markdown,
+    format_table,
+    run_scenario,
+)
+from uav_formation_baselines.evaluate import main as evaluate_main  # noqa: E402
 from uav_formation_baselines.plots import learning_curve  # noqa: E402
 from uav_formation_baselines.train import main as train_main  # noqa: E402
 from uav_formation_baselines.wrappers import (  # noqa: E402
@@ -36,9 +45,14 @@ from uav_formation_baselines.wrappers import (  # noqa: E402
     make_training_env,
 )
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides  # noqa: E402
-from uav_formation_env.envs.parallel import observations_of  # noqa: E402
 from uav_formation_env.envs.vector import FormationVecEnv  # noqa: E402
-from uav_formation_env.evaluation import SB3Policy, make_policy  # noqa: E402
+from uav_formation_env.episode import observations_of  # noqa: E402
+from uav_formation_env.evaluation import (  # noqa: E402
+    SB3Policy,
+    make_policy,
+    run_episodes,
+    summarise,
+)
 
 SHORT_N3 = {"duration": 4.0}  # 20 control steps per episode
 
@@ -276,3 +290,94 @@ def _normalized_venv(policy, scenario):
     """The loaded model's VecNormalize around a fresh VecEnv, as during training."""
     policy.normalizer.set_venv(FormationVecEnv(scenario, policy.model.n_envs // scenario.n_uav))
     return policy.normalizer
+
+
+# ------------------------------------------------------------------------- mission comparison
+MISSION_HEADERS = (
+    "realised J per UAV (mean ± 95% CI)",
+    "vs LFPIO",
+    "mission completed",
+    "route error RMS [m]",
+    "route error max [m]",
+    "velocity RMSE [m/s]",
+    "O1 met",
+    "O2 met",
+    "collisions after t = 0 (UAV-steps)",
+    "min separation after t = 0 [m]",
+)
+
+
+def _markdown_cells(markdown: str) -> dict[str, dict[str, str]]:
+    """{policy: {header: cell}} of the first markdown table in ``markdown``."""
+    lines = [line for line in markdown.splitlines() if line.startswith("| ")]
+    headers = [h.strip() for h in lines[0].strip("|").split("|")]
+    table = {}
+    for line in lines[1:]:
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        table[cells[0]] = dict(zip(headers, cells))
+    return table
+
+
+@pytest.fixture(scope="module")
+def small_comparison(tmp_path_factory):
+    """``python -m uav_formation_baselines.evaluate`` on heuristic and random, 2 seeds, 20 s."""
+    out = tmp_path_factory.mktemp("comparison")
+    argv = ["--seeds", "2", "--duration", "20", "--compare", "heuristic", "random"]
+    assert evaluate_main([*argv, "--out", str(out)]) == 0
+    scenario = with_overrides(resolve_scenario("paper"), {"duration": 20.0})
+    expected = {}
+    for name in ("heuristic", "random"):
+        batch = run_episodes(scenario, make_policy(name, scenario), [0, 1], policy_name=name)
+        expected[name] = summarise(batch)
+    return out, expected
+
+
+def test_comparison_table_has_the_mission_columns():
+    results = compare([], ["heuristic"], seeds=[0], scenario="paper", duration=4.0)
+    text, markdown = format_table(results), format_markdown(results)
+    for header in MISSION_HEADERS:
+        assert header in text and header in markdown, header
+    row = _markdown_cells(markdown)["heuristic"]
+    assert row["vs LFPIO"] == "-"  # lfpio was not evaluated: no ratio
+    assert set(MISSION_HEADERS) <= set(row)
+
+
+def test_comparison_outputs_agree_with_summarise(small_comparison):
+    out, expected = small_comparison
+    for name in OUTPUT_FILES:
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    markdown = (out / "comparison.md").read_text(encoding="utf-8")
+    assert "python -m uav_formation_baselines.evaluate --seeds 2 --duration 20" in markdown
+    table = _markdown_cells(markdown)
+    with open(out / "comparison.csv", newline="", encoding="utf-8") as stream:
+        rows = {row["policy"]: row for row in csv.DictReader(stream)}
+    summaries = yaml.safe_load((out / "summaries.json").read_text())  # JSON is YAML
+    assert set(table) == set(rows) == set(summaries) == {"heuristic", "random"}
+    for name, summary in expected.items():
+        mission = summary["mission"]
+        k, episodes = mission["completed"], mission["episodes"]
+        assert episodes == 2
+        assert table[name]["mission completed"] == f"{k}/{episodes}"
+        assert int(rows[name]["completed"]) == k
+        assert float(rows[name]["completion_rate"]) == pytest.approx(mission["completion_rate"])
+        assert summaries[name]["mission"]["completed_per_seed"] == mission["completed_per_seed"]
+        for key in ("route_error_rms_m", "route_error_max_m", "velocity_rmse_mps"):
+            assert float(rows[name][key]) == pytest.approx(mission[key], rel=1e-5)
+            assert float(rows[name][f"{key}_ci95"]) == pytest.approx(
+                mission[f"{key}_ci95"], rel=1e-5, abs=1e-9
+            )
+        assert float(rows[name]["realised_cost_mean"]) == pytest.approx(
+            summary["realised_cost_mean"], rel=1e-5
+        )
+        assert int(rows[name]["collisions_after_start"]) == mission["collisions_after_start"]
+        assert table[name]["collisions after t = 0 (UAV-steps)"] == str(
+            mission["collisions_after_start"]
+        )
+        for obstacle, stats in mission["obstacles"].items():
+            assert table[name][f"{obstacle} met"].startswith(f"{stats['met']}/{episodes}")
+            assert int(rows[name][f"{obstacle}_met"]) == stats["met"]
+        failed = sorted(mission["failures"], key=int)
+        assert rows[name]["failed_seeds"].split() == failed
+        assert mission["completed"] == episodes - len(failed)
+        for seed in failed:  # every failed seed is listed with its causes
+            assert f"seed {seed}: {'; '.join(mission['failures'][seed])}" in markdown

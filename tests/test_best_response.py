@@ -14,7 +14,7 @@ from scipy.optimize import minimize
 
 from uav_formation_env.config_io import paper_scenario
 from uav_formation_env.core.observation import build_observations, decode_observations
-from uav_formation_env.envs.parallel import observations_of
+from uav_formation_env.episode import observations_of
 from uav_formation_env.policies import (
     ExactConfig,
     NashConfig,

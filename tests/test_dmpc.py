@@ -1,4 +1,5 @@
-"""NashDMPCPolicy (docs/model.md §4.3, §5): warm start, trigger, one J_i, information pattern, closed loop.
+"""NashDMPCPolicy (docs/model.md §4.3, §5): warm start, trigger, one J_i, information pattern,
+closed loop.
 
 Also the per-receiver generalisation of the cost (``core/cost.py``) the policy relies on.
 """

@@ -1,4 +1,5 @@
-"""Tests of the double-integrator plant (docs/model.md §1): ZOH step, batched rollout, inverse map."""
+"""Tests of the double-integrator plant (docs/model.md §1): ZOH step, batched rollout, inverse
+map."""
 
 from __future__ import annotations
 

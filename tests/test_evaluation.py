@@ -10,7 +10,7 @@ import pytest
 
 from uav_formation_env.cli import main as cli_main
 from uav_formation_env.config_io import paper_scenario, with_overrides
-from uav_formation_env.envs.parallel import observations_of
+from uav_formation_env.episode import observations_of
 from uav_formation_env.evaluation import (
     RECORD_COLUMNS,
     HeuristicPolicy,

@@ -25,7 +25,7 @@ from uav_formation_env.core.disturbances import paper_sinusoid
 from uav_formation_env.core.observation import others_index
 from uav_formation_env.core.obstacles import detection_sq, obstacle_arrays
 from uav_formation_env.core.reference import config_cache, schedule_arrays
-from uav_formation_env.envs.parallel import validate_actions
+from uav_formation_env.episode import validate_actions
 
 N = 5
 

@@ -4,7 +4,8 @@ The loop is written here as in a simulator: per control step draw d, u = compens
 (+ command), a = u + d, run the observer over the tick velocities of the step, then advance the
 plant by zoh_step.
 
-Measured with the default gains, 5 UAVs, paper disturbance, seed 7, 200 s (docs/model.md §3.2-3.4 say
+Measured with the default gains, 5 UAVs, paper disturbance, seed 7, 200 s (docs/model.md §3.2-3.4
+say
 ≈ 0.010 m/s^2 and 0.09 m/s):
   rms(d_hat + s0 - d), t > 10 s            ≈ 0.0097 m/s^2  (seeds 0-5: 0.0096-0.0097)
   rms(d_hat - d) (estimate_without_s0)     ≈ 0.029 m/s^2   (seeds 0-5: 0.027-0.036)
@@ -169,7 +170,8 @@ def test_estimate_without_s0_is_worse(d_paper: np.ndarray, default_run) -> None:
 
 
 def test_one_substep_is_much_worse(d_paper: np.ndarray, default_run) -> None:
-    """docs/model.md §3.3: h = dt (1 tick per step) diverges or chatters. Measured: non-finite after 70-90
+    """docs/model.md §3.3: h = dt (1 tick per step) diverges or chatters. Measured: non-finite
+    after 70-90
     steps (seeds 0-7); rms over the first 50 steps ≈ 0.37 m/s^2 (seed 7) vs ≈ 0.01."""
     estimates, _ = default_run
     err_default = rms((estimates - d_paper)[SETTLED])
@@ -300,7 +302,8 @@ def reference_observer_step(
     ids=["default", "generic", "lambda2=1.7", "literal", "rho=0"],
 )
 def test_observer_step_matches_literal_spec(config: ObserverConfig) -> None:
-    """observer_step equals docs/model.md §3.3 written literally, over one 20-tick step of random data
+    """observer_step equals docs/model.md §3.3 written literally, over one 20-tick step of random
+    data
     (the module has a shortcut for λ1 = 2, λ2 = 1.5; this covers it and the generic path)."""
     rng = np.random.default_rng(5)
     shape = (4, N_UAV, 3)

@@ -14,7 +14,7 @@ from PIL import Image, ImageSequence
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import with_overrides
-from uav_formation_env.envs.parallel import observations_of
+from uav_formation_env.episode import observations_of
 from uav_formation_env.evaluation import make_policy, run_episodes
 from uav_formation_env.render import (
     COLLISION_COLOR,

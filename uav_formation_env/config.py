@@ -5,7 +5,8 @@ Every number the simulation uses lives here, with its unit. The defaults are the
 ``ValueError`` naming the field and the rule broken. Loading from a dict or YAML file (see
 :mod:`uav_formation_env.config_io`) rejects unknown keys by name.
 
-The flags marked *literal* switch on the paper's literal (and, per docs/model.md, inconsistent) readings;
+The flags marked *literal* switch on the paper's literal (and, per docs/model.md, inconsistent)
+readings;
 they are off by default.
 """
 
@@ -358,7 +359,8 @@ class ScheduleConfig:
 
 @dataclass(frozen=True)
 class InitialStateConfig:
-    """Initial-state distribution: positions uniform in a box, one common velocity (docs/model.md §8).
+    """Initial-state distribution: positions uniform in a box, one common velocity (docs/model.md
+    §8).
 
     Positions are drawn uniformly in the box and redrawn (only the UAVs too close to another)
     until every pair is at least ``min_spacing`` apart, so no episode starts in a collision. A
@@ -432,6 +434,44 @@ class CollisionConfig:
         _non_negative(self.penalty, "collision.penalty")
 
 
+REWARD_TRANSFORMS = ("raw", "scaled", "log1p")
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """What a step means to a learner beyond the physics: the training devices of the episode
+    layer (:mod:`uav_formation_env.episode`). Every device is off by default, so the reward is
+    minus the stage J_i (minus the collision penalty) and episodes end only by
+    ``collision.mode`` and the duration.
+
+    - ``reward``: ``"raw"`` ``-(J_i + penalty)``; ``"scaled"`` the same divided by
+      ``reward_scale``; ``"log1p"`` ``-log(1 + (J_i + penalty) / reward_scale)``, which keeps the
+      eight decades J_i spans within a few units. The raw J_i is always in the infos.
+    - Divergence: a copy in which some UAV is more than ``max_formation_error`` from its slot of
+      the formation (anchored at the swarm's mean) or more than ``max_velocity_error`` from its
+      reference velocity is *truncated* (neither rewarded nor punished for diverging); 0 = off.
+    - Mission corridor: a copy whose formation centroid is more than ``corridor_width`` from the
+      preset route (horizontally) is *terminated*, as a failed mission; 0 = off.
+    """
+
+    reward: str = "raw"  # "raw", "scaled" or "log1p"
+    reward_scale: float = 1.0  # J_0 of "scaled" and "log1p" [-]
+    max_formation_error: float = 0.0  # divergence bound on a UAV's formation error [m]; 0 = off
+    max_velocity_error: float = 0.0  # divergence bound on |v_i - v^d_i| [m/s]; 0 = off
+    corridor_width: float = 0.0  # half-width of the corridor around the preset route [m]; 0 = off
+
+    def __post_init__(self) -> None:
+        _require(
+            self.reward in REWARD_TRANSFORMS,
+            "episode.reward",
+            f"must be one of {REWARD_TRANSFORMS}, got {self.reward!r}",
+        )
+        _positive(self.reward_scale, "episode.reward_scale")
+        _non_negative(self.max_formation_error, "episode.max_formation_error")
+        _non_negative(self.max_velocity_error, "episode.max_velocity_error")
+        _non_negative(self.corridor_width, "episode.corridor_width")
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A whole scenario. The defaults are the paper's (docs/model.md §8)."""
@@ -448,6 +488,7 @@ class Scenario:
     initial: InitialStateConfig = field(default_factory=InitialStateConfig)
     collision: CollisionConfig = field(default_factory=CollisionConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
+    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
 
     def __post_init__(self) -> None:
         _positive(self.duration, "duration")

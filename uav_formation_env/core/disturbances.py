@@ -1,4 +1,5 @@
-"""External disturbances in the acceleration channel (docs/model.md §2), seeded through a passed Generator.
+"""External disturbances in the acceleration channel (docs/model.md §2), seeded through a passed
+Generator.
 
 The total disturbance of UAV i (0-based index, paper's UAV i+1) is the sum of
 

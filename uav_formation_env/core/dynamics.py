@@ -1,4 +1,5 @@
-"""Double-integrator UAV dynamics (docs/model.md §1): the one step used by the plant and by MPC prediction.
+"""Double-integrator UAV dynamics (docs/model.md §1): the one step used by the plant and by MPC
+prediction.
 
 State per UAV ``z = [p; v]`` with shape ``(..., 6)`` [m, m/s], z up. The acceleration ``a`` [m/s^2]
 is held over the step (zero-order hold), which makes the step exact:

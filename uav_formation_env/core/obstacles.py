@@ -198,7 +198,8 @@ def obstacle_distances(positions: np.ndarray, avoidance: AvoidanceConfig) -> np.
 def choose_sides(lat: np.ndarray, deadband: float) -> tuple[np.ndarray, np.ndarray]:
     """Each UAV's side of an obstacle's centre line at activation, and whether that is case 1.
 
-    docs/model.md §7's rule is the sign of λ_lat. A UAV within ``deadband`` of the centre line has no
+    docs/model.md §7's rule is the sign of λ_lat. A UAV within ``deadband`` of the centre line has
+    no
     meaningful side, so if every UAV of one side is that close the whole formation is assigned
     to the other side (case 1) instead of splitting off a member that sits on the line
     (docs/deviations.md §6). ``deadband = 0`` is the rule of docs/model.md exactly.

@@ -1,6 +1,7 @@
 """The preset velocity schedule (eq. 23) and the reference preview over the MPC horizon.
 
-See docs/model.md §4.3 for the preview: the schedule at t + kδ, or the current reference held while avoiding.
+See docs/model.md §4.3 for the preview: the schedule at t + kδ, or the current reference held while
+avoiding.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ __all__ = [
     "preset_displacement",
     "preset_velocity",
     "reference_preview",
+    "route_error",
     "schedule_arrays",
 ]
 
@@ -105,6 +107,28 @@ def preset_displacement(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
     end = np.concatenate((np.maximum(times, 0.0), [np.inf]))  # (K+1,) and ends
     covered = np.clip(t, start, end) - start  # (..., K+1) [s]
     return covered @ velocities
+
+
+def route_error(
+    schedule: ScheduleConfig, t: np.ndarray, centroid: np.ndarray, start: np.ndarray
+) -> np.ndarray:
+    """Horizontal distance of the formation centroid from the preset route.
+
+    The preset route is ``start`` (the centroid at t = 0) plus :func:`preset_displacement`: where
+    the formation would be had it flown the preset velocity of eq. 23 exactly, without avoidance.
+
+    Args:
+        schedule: the preset velocity.
+        t: (...) time [s], broadcastable against the leading axes of ``centroid``.
+        centroid: (..., 3) formation centroid [m].
+        start: (..., 3) centroid at t = 0 [m].
+
+    Returns:
+        (...) [m].
+    """
+    route = start + preset_displacement(schedule, t)
+    offset = (centroid - route)[..., :2]
+    return np.sqrt((offset**2).sum(axis=-1))
 
 
 def reference_preview(

@@ -22,7 +22,8 @@ call runs three phases in this order:
 2. **Guides and ends.** Group slot 0 holds side +1, slot 1 side -1 (in case 1 the unused slot is
    empty). Every update, a group's guide is its in-range member that needs the largest turn
    towards the group's side to clear the safety circle (the signed angle from ê to the member's
-   own tangent direction; ties: lowest index). This deviates from docs/model.md §7's "innermost, chosen
+   own tangent direction; ties: lowest index). This deviates from docs/model.md §7's "innermost,
+   chosen
    once" (see docs/deviations.md): it reduces to the innermost member for members abreast of
    each other, but when the V is stretched along the track (heading +y at O2) a member ahead
    at nearly the same lateral offset needs more turn than the innermost one behind it, and the

@@ -12,7 +12,8 @@ from typing import Any
 
 from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 
-from uav_formation_env.envs.parallel import UAVFormationParallelEnv, validate_action
+from uav_formation_env.envs.parallel import UAVFormationParallelEnv
+from uav_formation_env.episode import validate_action
 
 
 class UAVFormationAECEnv(parallel_to_aec_wrapper):

@@ -39,23 +39,15 @@ estimates / 0.5 m/s², t / duration, and the adjacency matrix, flattened (float3
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.observation import (
-    DISTANCE_SCALE,
-    ESTIMATE_SCALE,
-    OBSERVATION_BOUND,
-    VELOCITY_SCALE,
-    build_observations,
-    observation_dim,
-)
+from uav_formation_env.core.observation import OBSERVATION_BOUND, observation_dim
+from uav_formation_env.episode import FormationEpisodes, validate_actions
 from uav_formation_env.seeding import check_seed
-from uav_formation_env.sim import FormationSim, StepResult
+from uav_formation_env.sim import StepResult
 
 RENDER_MODES = ["rgb_array", "human"]
 
@@ -63,92 +55,6 @@ RENDER_MODES = ["rgb_array", "human"]
 def agent_names(n_uav: int) -> list[str]:
     """``["uav_0", …, "uav_{N-1}"]``."""
     return [f"uav_{i}" for i in range(n_uav)]
-
-
-def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
-    """(B, N, dim) observations of a sim step, the one place the env encodes them."""
-    scenario = sim.scenario
-    return build_observations(
-        result.z,
-        result.reference_velocity,
-        result.estimate,
-        result.adjacency,
-        result.avoiding,
-        result.t / scenario.duration,
-        sim.offsets,
-        sim.obstacle_centers,
-        sim.obstacle_radii,
-        result.min_separation,
-        scenario.formation.mirrored_offsets,
-    )
-
-
-def global_state(sim: FormationSim, result: StepResult) -> np.ndarray:
-    """(B, 12 N + 1 + N²) global state for centralised critics (see module docstring)."""
-    batch = result.z.shape[0]
-    parts = (
-        result.z[..., :3].reshape(batch, -1) / DISTANCE_SCALE,
-        result.z[..., 3:].reshape(batch, -1) / VELOCITY_SCALE,
-        result.reference_velocity.reshape(batch, -1) / VELOCITY_SCALE,
-        result.estimate.reshape(batch, -1) / ESTIMATE_SCALE,
-        (result.t / sim.scenario.duration)[:, None],
-        result.adjacency.reshape(batch, -1),
-    )
-    return np.concatenate(parts, axis=-1).astype(np.float32)
-
-
-def penalties(sim: FormationSim, result: StepResult) -> np.ndarray:
-    """(B, N) collision penalty of each agent in this step (0 unless mode is "penalty")."""
-    cfg = sim.scenario.collision
-    if cfg.mode != "penalty":
-        return np.zeros(result.collision.shape)
-    return cfg.penalty * result.collision
-
-
-def validate_action(agent: str, action: Any) -> np.ndarray:
-    """One agent's action as a (3,) float array; ``ValueError`` naming the agent if it is not
-    three finite real numbers (strings, complex numbers and objects are refused, not coerced)."""
-    value = np.asarray(action)
-    if value.dtype.kind not in "biuf":
-        raise ValueError(
-            f"action of {agent} must be 3 real numbers, got {action!r} (dtype {value.dtype})"
-        )
-    value = value.astype(float)
-    if value.shape != (3,):
-        raise ValueError(f"action of {agent} must have shape (3,), got {value.shape}")
-    if not np.isfinite(value).all():
-        raise ValueError(f"action of {agent} contains NaN or infinite values: {value}")
-    return value
-
-
-def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
-    """Check an action dict and return the clipped (N, 3) array; raise ``ValueError`` if bad."""
-    if isinstance(actions, dict) and len(actions) == len(agents):
-        # Fast path for a well-formed dict (every step of a normal run): one conversion and one
-        # check for all agents. Anything unusual falls through to the agent-by-agent checks,
-        # which name the culprit.
-        try:
-            stacked = np.array([actions[agent] for agent in agents])
-        except (KeyError, TypeError, ValueError):
-            stacked = None
-        if (
-            stacked is not None
-            and stacked.dtype.kind in "iuf"
-            and stacked.shape == (len(agents), 3)
-            and np.isfinite(stacked).all()
-        ):
-            # np.clip for finite values, without its Python wrappers
-            return np.minimum(np.maximum(stacked.astype(float), -1.0), 1.0)
-    if not isinstance(actions, dict):
-        raise ValueError(f"actions must be a dict {{agent: (3,) array}}, got {type(actions)}")
-    unknown = sorted(set(actions) - set(agents))
-    if unknown:
-        raise ValueError(f"unknown agent(s) {unknown}; expected the agents {agents}")
-    missing = [a for a in agents if a not in actions]
-    if missing:
-        raise ValueError(f"missing action(s) for agent(s) {missing}; every live agent must act")
-    stacked = np.stack([validate_action(agent, actions[agent]) for agent in agents])
-    return np.clip(stacked, -1.0, 1.0)
 
 
 class UAVFormationParallelEnv(ParallelEnv):
@@ -173,7 +79,8 @@ class UAVFormationParallelEnv(ParallelEnv):
             )
         self.scenario = scenario
         self.render_mode = render_mode
-        self.sim = FormationSim(scenario, batch_size=1)
+        self.episodes = FormationEpisodes(scenario, batch_size=1)
+        self.sim = self.episodes.sim
         self.possible_agents = agent_names(scenario.n_uav)
         self.agents: list[str] = []
         dim = observation_dim(scenario.n_uav)
@@ -214,7 +121,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         """Start an episode; ``seed`` (None or an int >= 0) makes it (and later unseeded resets)
         reproducible."""
         seed = check_seed(seed)
-        self._result = self.sim.reset(seed=None if seed is None else [seed])
+        self._result = self.episodes.reset(seed=None if seed is None else [seed]).result
         self.agents = list(self.possible_agents)
         if self._renderer is not None:
             self._renderer.reset()
@@ -224,18 +131,13 @@ class UAVFormationParallelEnv(ParallelEnv):
         """Advance one control step δ with every live agent's normalised action."""
         if not self.agents:
             raise RuntimeError("the episode is over (or reset() was never called): call reset()")
-        clipped = validate_actions(actions, self.agents)
-        result = self.sim.step(clipped[None] * self.scenario.dynamics.u_max)
-        self._result = result
-        penalty = penalties(self.sim, result)[0]
-        total = result.cost.total[0]
-        reward = -(total + penalty)
-        collided = bool(result.collision[0].any())
-        terminated = self.scenario.collision.mode == "terminate" and collided
-        truncated = bool(result.truncated[0]) and not terminated
+        step = self.episodes.step(validate_actions(actions, self.agents)[None])
+        self._result = step.result
+        penalty, total = step.penalty[0], step.cost[0]
+        terminated, truncated = bool(step.terminated[0]), bool(step.truncated[0])
         obs = self._observations()
         infos = self._infos(penalty, total)
-        rewards = dict(zip(self.agents, reward.tolist()))
+        rewards = dict(zip(self.agents, step.reward[0].tolist()))
         terminations = dict.fromkeys(self.agents, terminated)
         truncations = dict.fromkeys(self.agents, truncated)
         if terminated or truncated:
@@ -245,7 +147,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         return obs, rewards, terminations, truncations, infos
 
     def _observations(self) -> dict[str, np.ndarray]:
-        obs = observations_of(self.sim, self._result)[0]
+        obs = self.episodes.observe()[0]
         return dict(zip(self.possible_agents, obs))  # row views, as obs[i]
 
     def _infos(self, penalty: np.ndarray, total: np.ndarray | None = None) -> dict[str, dict]:
@@ -306,7 +208,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         """Global state (see the module docstring)."""
         if self._result is None:
             raise RuntimeError("call reset() before state()")
-        return global_state(self.sim, self._result)[0]
+        return self.episodes.state()[0]
 
     def render(self) -> np.ndarray | None:
         """Top view: an RGB array ("rgb_array") or a window ("human")."""

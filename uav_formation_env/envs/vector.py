@@ -23,13 +23,9 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.envs.parallel import (
-    UAVFormationParallelEnv,
-    observations_of,
-    penalties,
-)
+from uav_formation_env.envs.parallel import UAVFormationParallelEnv
+from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.seeding import check_seed
-from uav_formation_env.sim import FormationSim
 
 
 class FormationVecEnv(VecEnv):
@@ -46,7 +42,8 @@ class FormationVecEnv(VecEnv):
         self.scenario = scenario
         self.n_uav = scenario.n_uav
         self.num_copies = int(num_copies)
-        self.sim = FormationSim(scenario, batch_size=self.num_copies)
+        self.episodes = FormationEpisodes(scenario, self.num_copies, autoreset=True)
+        self.sim = self.episodes.sim
         self.render_mode = None
         super().__init__(
             self.num_copies * self.n_uav,
@@ -67,51 +64,43 @@ class FormationVecEnv(VecEnv):
         return [s for s in self._copy_seeds for _ in range(self.n_uav)]
 
     def reset(self) -> np.ndarray:
-        result = self.sim.reset(seed=self._copy_seeds)
+        step = self.episodes.reset(seed=self._copy_seeds)
         self._copy_seeds = [None] * self.num_copies
         self._reset_seeds()
         self._reset_options()
-        return self._flat(observations_of(self.sim, result))
+        return self._flat(step.observation)
 
     # ------------------------------------------------------------------ stepping
     def step_async(self, actions: np.ndarray) -> None:
         actions = np.asarray(actions)
         if actions.dtype.kind not in "biuf":
             raise ValueError(f"actions must be real numbers, got dtype {actions.dtype}")
-        actions = actions.astype(float)
         expected = (self.num_envs, 3)
         if actions.shape != expected:
             raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
         if not np.isfinite(actions).all():
             bad = sorted({int(k) for k in np.argwhere(~np.isfinite(actions))[:, 0]})
             raise ValueError(f"actions of entries {bad} contain NaN or infinite values")
-        self._actions = np.clip(actions, -1.0, 1.0)
+        self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
         if self._actions is None:
             raise RuntimeError("step_async() must come before step_wait()")
-        u_n = self._actions.reshape(self.num_copies, self.n_uav, 3) * self.scenario.dynamics.u_max
+        actions = self._actions.reshape(self.num_copies, self.n_uav, 3)
         self._actions = None
-        result = self.sim.step(u_n)
-        rewards = -(result.cost.total + penalties(self.sim, result))
-        terminated = (self.scenario.collision.mode == "terminate") & result.collision.any(axis=1)
-        truncated = result.truncated & ~terminated
-        done_copy = terminated | truncated
-        obs = observations_of(self.sim, result)
+        step = self.episodes.step(actions)
         infos: list[dict[str, Any]] = [
             {"J": float(j), "collision": bool(c)}
-            for j, c in zip(result.cost.total.ravel(), result.collision.ravel())
+            for j, c in zip(step.cost.ravel(), step.result.collision.ravel())
         ]
-        if done_copy.any():
-            for b in np.flatnonzero(done_copy):
+        if step.final_observation is not None:
+            for b in np.flatnonzero(step.done):
                 for i in range(self.n_uav):
                     info = infos[b * self.n_uav + i]
-                    info["terminal_observation"] = obs[b, i].copy()
-                    info["TimeLimit.truncated"] = bool(truncated[b])
-            reset = self.sim.reset(seed=None, mask=done_copy)
-            obs = np.where(done_copy[:, None, None], observations_of(self.sim, reset), obs)
-        dones = np.repeat(done_copy, self.n_uav)
-        return self._flat(obs), rewards.ravel().astype(np.float32), dones, infos
+                    info["terminal_observation"] = step.final_observation[b, i].copy()
+                    info["TimeLimit.truncated"] = bool(step.truncated[b])
+        dones = np.repeat(step.done, self.n_uav)
+        return self._flat(step.observation), step.reward.ravel().astype(np.float32), dones, infos
 
     def _flat(self, obs: np.ndarray) -> np.ndarray:
         return obs.reshape(self.num_envs, -1)

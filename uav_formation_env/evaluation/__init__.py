@@ -2,7 +2,7 @@
 
 One :class:`~uav_formation_env.sim.FormationSim` runs every seed of an evaluation as one copy of a
 batch, and the policy is called once per control step on the ``(B, N, dim)`` observations of
-:func:`~uav_formation_env.envs.parallel.observations_of` (exactly what the PettingZoo env hands
+:func:`~uav_formation_env.episode.observations_of` (exactly what the PettingZoo env hands
 its agents). A policy is anything with
 
 - ``act_batch(obs) -> actions``: ``(B, N, dim)`` observations to ``(B, N, 3)`` normalised actions

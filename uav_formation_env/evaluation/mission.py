@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.reference import preset_displacement, preset_velocity
+from uav_formation_env.core.reference import preset_displacement, preset_velocity, route_error
 
 # two-sided 95 % Student t quantiles for 1..30 degrees of freedom
 _T95 = (
@@ -151,7 +151,7 @@ def mission_metrics(
     p, v = z[..., :3], z[..., 3:]
     centroid = p.mean(axis=2)  # (T+1, B, 3)
     route = preset_route(scenario, t, centroid[0])
-    route_error = np.linalg.norm((centroid - route)[..., :2], axis=-1)  # (T+1, B)
+    off_route = route_error(scenario.schedule, t[:, None], centroid, centroid[0])  # (T+1, B)
     v_preset = preset_velocity(scenario.schedule, t)[:, None, None, :]
     velocity_error2 = ((v - v_preset) ** 2).sum(axis=-1)  # (T+1, B, N)
 
@@ -175,8 +175,8 @@ def mission_metrics(
     separation = np.asarray(min_separation, dtype=float)[1:].min(axis=2)  # (T, B)
     closest_step = separation.argmin(axis=0)
     return MissionMetrics(
-        route_error_rms=np.sqrt((route_error**2).mean(axis=0)),
-        route_error_max=route_error.max(axis=0),
+        route_error_rms=np.sqrt((off_route**2).mean(axis=0)),
+        route_error_max=off_route.max(axis=0),
         velocity_rmse=np.sqrt(velocity_error2.mean(axis=(0, 2))),
         obstacle_required=required,
         obstacle_met=met,

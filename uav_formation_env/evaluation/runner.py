@@ -13,11 +13,10 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import with_overrides
 from uav_formation_env.core.observation import decode_observations
 from uav_formation_env.core.topology import obstacle_distances
-from uav_formation_env.envs.parallel import observations_of
+from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation.policies import BatchPolicy
 from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
 from uav_formation_env.seeding import check_seed
-from uav_formation_env.sim import FormationSim
 
 
 @dataclass
@@ -110,12 +109,14 @@ def run_episodes(
     if not seeds or None in seeds:
         raise ValueError("seeds must be a non-empty list of non-negative ints")
     batch, n_steps = len(seeds), scenario.n_steps
-    sim = FormationSim(scenario, batch_size=batch)
+    # evaluation's rule: every seed is flown to its end, collisions are counted, not ended on
+    episodes = FormationEpisodes(scenario, batch, fly_on_after_collision=True)
+    sim = episodes.sim
     if hasattr(policy, "reset"):
         policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
     start = time.perf_counter()
-    result = sim.reset(seed=seeds)
-    obs = observations_of(sim, result)
+    step = episodes.reset(seed=seeds)
+    result, obs = step.result, step.observation
 
     def centre_min(z: np.ndarray) -> np.ndarray:
         if len(sim.obstacle_radii) == 0:
@@ -145,8 +146,8 @@ def run_episodes(
             gap = measure_nash_gap(obs, scenario, policy_plans(policy, obs, actions, scenario))
             gaps.append((gap.gap, gap.cost, gap.in_box))
         t_sim = time.perf_counter()
-        result = sim.step(np.clip(actions, -1.0, 1.0) * sim.u_max)
-        obs = observations_of(sim, result)
+        step = episodes.step(actions)
+        result, obs = step.result, step.observation
         policy_seconds[k] = t1 - t0
         sim_seconds[k] = time.perf_counter() - t_sim
         states.append(_state_record(result, centre_min))
@@ -216,7 +217,8 @@ def policy_plans(
 
     A policy that broadcasts plans (the DMPC's ``plans``) gives them as they are. Any other
     policy's plan is its action ``a · u_max`` held over the horizon, clipped to the UAV's box
-    ``|u_n| <= u_max - |estimate|`` (docs/model.md §1.5: the part of the actuator range the plant leaves
+    ``|u_n| <= u_max - |estimate|`` (docs/model.md §1.5: the part of the actuator range the plant
+    leaves
     to the formation input while the observer compensates).
 
     Returns:

@@ -33,7 +33,8 @@ Algorithm per control step, for every UAV i simultaneously (a Jacobi best-respon
    (:func:`~uav_formation_env.core.cost.prepare_horizon_cost`, the same terms as the reward's
    :func:`~uav_formation_env.core.cost.stage_cost`).
 4. Event trigger: if ``J_pre > threshold`` (10), minimise J_i with PIO / LFPIO / PSO from W_i as the
-   initial global best over the box ``|u_n,c| <= u_max - |u_d,c|`` per axis (docs/model.md §1.5, with
+   initial global best over the box ``|u_n,c| <= u_max - |u_d,c|`` per axis (docs/model.md §1.5,
+   with
    ``u_d = -estimate``); the output is the better of W_i and the best sequence found, so it is
    never worse than W_i. Otherwise the output is W_i (not triggered, no evaluations). All
    triggered problems of all copies are gathered into one flat batch and solved by one
@@ -184,7 +185,8 @@ class NashDMPCPolicy:
             :meth:`reset`, or, without them, the root the copies' streams are spawned from
             (None: fresh entropy).
         threshold: event-trigger threshold on J_i(W) [-].
-        inner_rounds: K exchange / re-optimise rounds per step (docs/model.md §5; 1 = the paper; must be 1
+        inner_rounds: K exchange / re-optimise rounds per step (docs/model.md §5; 1 = the paper;
+        must be 1
             for ``"nash"``, which iterates to equilibrium itself).
         population_cost: how the optimiser's populations are evaluated: ``"quadratic"`` (J_i's
             exact quadratic coefficients, identified once per step from the one definition, plus

@@ -1,6 +1,7 @@
 """Reproduction of the paper's experiment: Table 2 and Figs. 5-9 for the four variants.
 
-The variants are {PIO, LFPIO} x {NFTSMO off, on} (docs/model.md §8), flown on the same seeds. Each variant
+The variants are {PIO, LFPIO} x {NFTSMO off, on} (docs/model.md §8), flown on the same seeds. Each
+variant
 runs all its seeds as one batch (:func:`~uav_formation_env.evaluation.run_episodes`: one
 ``FormationSim`` of B = seeds copies and one ``NashDMPCPolicy.act_batch`` call per step); the
 variants run in parallel processes (``jobs``; default one per CPU), which changes no number.

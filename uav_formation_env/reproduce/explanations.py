@@ -67,7 +67,8 @@ def difference_paragraphs(
         "(q, r, m, n) (docs/model.md §4.4 chose them by calibration), the population size N_p = 30 "
         "(docs/model.md §6: N_p = 20/30/50 gave 527/505/486 triggers in one calibration run), "
         "u_max = 5 m/s², the NFTSMO gains and the reading of '0.1 rand' (per axis, redrawn "
-        "every step). docs/model.md §8's calibration with these defaults found about 469 (PIO) and 458 "
+        "every step). docs/model.md §8's calibration with these defaults found about 469 (PIO) "
+        "and 458 "
         "(LFPIO) with 1–2 seeds."
     )
     for variant in obs_variants:
@@ -121,7 +122,8 @@ def difference_paragraphs(
             f"{medians[0]:.1f} vs {medians[1]:.1f}; paired difference PIO − LFPIO "
             f"{np.mean(diff):.1f} ± {sem:.1f} (s.e.) triggers per UAV, "
             f"LFPIO lower in {wins}/{n_seeds} seeds) vs the paper's "
-            f"{100 * PAPER_LFPIO_REDUCTION:.1f}%.** docs/model.md §8's calibration also found LFPIO only "
+            f"{100 * PAPER_LFPIO_REDUCTION:.1f}%.** docs/model.md §8's calibration also found "
+            "LFPIO only "
             "about 2% better. Both optimisers start from the warm start W as global best and "
             "never return anything worse"
             + (
@@ -144,7 +146,8 @@ def difference_paragraphs(
         act, res = events["O1"]["activate_s"], events["O1"]["restore_s"]
         out.append(
             f"- **O1 split at {fmt_number(act)} s (paper 10 s).** Detection when a UAV in the "
-            "obstacle strip comes within d^o = 70 m of the centre (docs/model.md §7, a proposed value); "
+            "obstacle strip comes within d^o = 70 m of the centre (docs/model.md §7, a proposed "
+            "value); "
             "the time depends on the random start box (the leading UAV starts at x ≤ 40 m)."
         )
         later = "" if res is None else f"; ours {res - 13.6:+.1f} s"
@@ -154,7 +157,8 @@ def difference_paragraphs(
             "when a UAV has passed the obstacle. Our rule (docs/deviations.md §1): a group ends "
             "when none of its members is left in the obstacle strip (all abreast of the centre "
             "or laterally clear), and H0 returns when every group has ended, so the restore "
-            "waits for the last member of the V (the V is 20 m deep). the calibration of docs/model.md, with "
+            "waits for the last member of the V (the V is 20 m deep). the calibration of "
+            "docs/model.md, with "
             "the guide-abreast rule, found 15.2–15.6 s."
         )
     if "O2" in events and events["O2"]["activate_s"] is not None:
@@ -163,7 +167,8 @@ def difference_paragraphs(
             f"- **O2 encounter at {fmt_number(act)} s (paper 66.2 s).** After the turn at 50 s "
             "the V "
             "heads +y stretched along the track; when it meets O2 depends on where the formation "
-            "sits laterally after the turn and on d^o (docs/model.md §7: 63.6–69.8 s in calibration, "
+            "sits laterally after the turn and on d^o (docs/model.md §7: 63.6–69.8 s in "
+            "calibration, "
             "depending on the weights)."
         )
     elif "O2" in events and full:
@@ -188,7 +193,8 @@ def difference_paragraphs(
         )
         out.append(
             f"- **Observer**: rms(estimate − d) = {spread} m/s² after "
-            f"{OBSERVER_WARMUP_S:g} s (docs/model.md §8 calibration: about 0.010). The paper shows Fig. 6 "
+            f"{OBSERVER_WARMUP_S:g} s (docs/model.md §8 calibration: about 0.010). The paper "
+            "shows Fig. 6 "
             "only qualitatively. Our error looks like white noise at the step rate (Fig. 6, "
             "bottom panel), consistent with the observer lagging the 0.1 rand noise, which is "
             "redrawn every step."
@@ -213,7 +219,8 @@ def difference_paragraphs(
         )
         out.append(
             f"- **Clearance**: closest approach to an obstacle centre {closest:.1f} m over all "
-            f"variants and seeds ({where}; docs/model.md §7 calibration: 37.7 m at O1, 39.5 m at O2). The "
+            f"variants and seeds ({where}; docs/model.md §7 calibration: 37.7 m at O1, 39.5 m at "
+            "O2). The "
             "tangent reference enters only through the cost's velocity term and is not a hard "
             "constraint, so UAVs can come inside the safety circle. The paper gives no "
             "distances."

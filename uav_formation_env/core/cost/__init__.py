@@ -1,4 +1,5 @@
-"""The game cost J_i (eq. 6, docs/model.md §4): one definition behind the env reward and the MPC objective.
+"""The game cost J_i (eq. 6, docs/model.md §4): one definition behind the env reward and the MPC
+objective.
 
 For UAV i over a horizon of H steps, with ``ε_ij(k) = (z_i(k) - z^d_i) - (ẑ_j(k) - z^d_j)``:
 
@@ -6,7 +7,8 @@ For UAV i over a horizon of H steps, with ``ε_ij(k) = (z_i(k) - z^d_i) - (ẑ_j
         + m Σ_j h_ij ||ε_ij(H)||² + n Σ_{k<=H} ||v_i(k) - v^d_i(k)||²
         + s Σ_{j≠i} Σ_{k<=H} max(0, d_s - ||p_i(k) - p̂_j(k)||)²
 
-``||x||_w`` is read as ``w xᵀx`` (docs/model.md §4.1). The last line, the separation term, is not in the
+``||x||_w`` is read as ``w xᵀx`` (docs/model.md §4.1). The last line, the separation term, is not
+in the
 paper (docs/deviations.md §5): it runs over every other UAV j (sensed, not only neighbours) and
 vanishes while all UAVs are at least d_s apart. The stage cost, the reward of one realised
 transition, is the ``k``-th summand: ``q Σ_j h_ij ||ε_ij||² + r ||u_i||² + n ||v_i - v^d_i||²

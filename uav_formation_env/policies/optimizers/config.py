@@ -38,7 +38,8 @@ def _flag(value: object, field_name: str) -> None:
 
 @dataclass(frozen=True)
 class PIOConfig:
-    """Pigeon-inspired optimisation (docs/model.md §6.1; Table 1: Nc1max = 25, Nc2max = 5, R = 0.1)."""
+    """Pigeon-inspired optimisation (docs/model.md §6.1; Table 1: Nc1max = 25, Nc2max = 5, R =
+    0.1)."""
 
     n_pigeons: int = 30  # Np [proposed, docs/model.md §6]
     map_compass_iters: int = 25  # Nc1max

@@ -61,7 +61,8 @@ def lfpio_search(run: Population, rng: np.random.Generator, cfg: LFPIOConfig) ->
     low, high = run.full_bounds(p)
     centre = weighted_centre_into(x, cost, cfg.center_divide_by_np, work)[:, None, :]
     for it in range(1, cfg.iters + 1):
-        # eq. 18 with the resolutions of docs/model.md: X_{l-1} in the velocity, X^c_{l-1} in the Lévy move.
+        # eq. 18 with the resolutions of docs/model.md: X_{l-1} in the velocity, X^c_{l-1} in the
+        # Lévy move.
         rand = run.rand(rng, p, cfg.per_dimension_rand)
         np.subtract(centre, x, out=to_centre)
         np.subtract(run.best_x[:, None, :], x, out=to_best)

@@ -1,0 +1,327 @@
+"""The episode layer: what a step means to the agents, for B copies at once.
+
+Every view of the environment (PettingZoo parallel and AEC, Gymnasium, the SB3 VecEnv), the
+evaluation runner and the trainer recipes call :class:`FormationEpisodes`; none of them holds a
+formula or an episode rule of its own. It owns:
+
+- **actions**: validation (three finite real numbers per agent) and scaling, ``u_n = clip(a, -1,
+  1) · u_max``;
+- **observations and state**: :meth:`FormationEpisodes.observe` (the per-agent layout of
+  :mod:`uav_formation_env.core.observation`) and :meth:`FormationEpisodes.state` (centralised);
+- **reward**: minus the stage cost of J_i, minus the collision penalty in ``"penalty"`` mode,
+  through the reward transform of ``scenario.episode`` (raw by default);
+- **termination**: ``collision.mode == "terminate"`` and a collision, or the formation centroid
+  outside the mission corridor (``episode.corridor_width``): the mission failed;
+- **truncation**: the scenario's duration, or divergence (``episode.max_formation_error``,
+  ``episode.max_velocity_error``), which ends a copy without rewarding or punishing it;
+- **per-copy autoreset** (``autoreset=True``): a copy whose episode ended is reset at once; its
+  last observation is kept as ``final_observation``.
+
+Table of the episode options (``scenario.episode``; units; all off by default):
+
+| option | default | unit | effect |
+|---|---|---|---|
+| ``reward`` | ``"raw"`` | - | ``"raw"`` -(J_i + p), ``"scaled"`` -(J_i + p) / J_0, ``"log1p"`` -log(1 + (J_i + p) / J_0) |
+| ``reward_scale`` | 1 | - | J_0 |
+| ``max_formation_error`` | 0 (off) | m | truncate a copy with a UAV this far from its slot |
+| ``max_velocity_error`` | 0 (off) | m/s | truncate a copy with a UAV this far from its reference velocity |
+| ``corridor_width`` | 0 (off) | m | terminate a copy whose centroid leaves the corridor around the preset route |
+
+``fly_on_after_collision=True`` (the evaluation runner's rule, a constructor option) keeps flying a
+copy after a collision in ``"terminate"`` mode, so that every seed is flown to its end and its
+collisions are counted; training and evaluation apply the same rules unless told otherwise.
+"""  # noqa: E501
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.core.cost import anchored
+from uav_formation_env.core.observation import (
+    DISTANCE_SCALE,
+    ESTIMATE_SCALE,
+    VELOCITY_SCALE,
+    build_observations,
+)
+from uav_formation_env.core.reference import route_error
+from uav_formation_env.sim import FormationSim, SeedLike, StepResult
+
+__all__ = [
+    "EpisodeStep",
+    "FormationEpisodes",
+    "global_state",
+    "observations_of",
+    "validate_action",
+    "validate_actions",
+]
+
+
+def validate_action(agent: str, action: Any) -> np.ndarray:
+    """One agent's action as a (3,) float array; ``ValueError`` naming the agent if it is not
+    three finite real numbers (strings, complex numbers and objects are refused, not coerced)."""
+    value = np.asarray(action)
+    if value.dtype.kind not in "biuf":
+        raise ValueError(
+            f"action of {agent} must be 3 real numbers, got {action!r} (dtype {value.dtype})"
+        )
+    value = value.astype(float)
+    if value.shape != (3,):
+        raise ValueError(f"action of {agent} must have shape (3,), got {value.shape}")
+    if not np.isfinite(value).all():
+        raise ValueError(f"action of {agent} contains NaN or infinite values: {value}")
+    return value
+
+
+def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
+    """An action dict as the clipped (N, 3) array; ``ValueError`` naming the agent if bad."""
+    if isinstance(actions, dict) and len(actions) == len(agents):
+        # Fast path for a well-formed dict (every step of a normal run): one conversion and one
+        # check for all agents. Anything unusual falls through to the agent-by-agent checks,
+        # which name the culprit.
+        try:
+            stacked = np.array([actions[agent] for agent in agents])
+        except (KeyError, TypeError, ValueError):
+            stacked = None
+        if (
+            stacked is not None
+            and stacked.dtype.kind in "iuf"
+            and stacked.shape == (len(agents), 3)
+            and np.isfinite(stacked).all()
+        ):
+            # np.clip for finite values, without its Python wrappers
+            return np.minimum(np.maximum(stacked.astype(float), -1.0), 1.0)
+    if not isinstance(actions, dict):
+        raise ValueError(f"actions must be a dict {{agent: (3,) array}}, got {type(actions)}")
+    unknown = sorted(set(actions) - set(agents))
+    if unknown:
+        raise ValueError(f"unknown agent(s) {unknown}; expected the agents {agents}")
+    missing = [a for a in agents if a not in actions]
+    if missing:
+        raise ValueError(f"missing action(s) for agent(s) {missing}; every live agent must act")
+    stacked = np.stack([validate_action(agent, actions[agent]) for agent in agents])
+    return np.clip(stacked, -1.0, 1.0)
+
+
+def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
+    """(B, N, dim) float32 observations of a sim step, the one place they are encoded."""
+    scenario = sim.scenario
+    return build_observations(
+        result.z,
+        result.reference_velocity,
+        result.estimate,
+        result.adjacency,
+        result.avoiding,
+        result.t / scenario.duration,
+        sim.offsets,
+        sim.obstacle_centers,
+        sim.obstacle_radii,
+        result.min_separation,
+        scenario.formation.mirrored_offsets,
+    )
+
+
+def global_state(sim: FormationSim, result: StepResult) -> np.ndarray:
+    """(B, 12 N + 1 + N²) float32 global state for centralised critics: positions / 100 m,
+    velocities / 20 m/s, reference velocities / 20 m/s, estimates / 0.5 m/s², t / duration, the
+    adjacency matrix."""
+    batch = result.z.shape[0]
+    parts = (
+        result.z[..., :3].reshape(batch, -1) / DISTANCE_SCALE,
+        result.z[..., 3:].reshape(batch, -1) / VELOCITY_SCALE,
+        result.reference_velocity.reshape(batch, -1) / VELOCITY_SCALE,
+        result.estimate.reshape(batch, -1) / ESTIMATE_SCALE,
+        (result.t / sim.scenario.duration)[:, None],
+        result.adjacency.reshape(batch, -1),
+    )
+    return np.concatenate(parts, axis=-1).astype(np.float32)
+
+
+@dataclass
+class EpisodeStep:
+    """What a reset or a step of B copies means to the agents (arrays over copies B, agents N).
+
+    ``result`` is the simulator's step (the state the reward and the flags describe); with
+    autoreset, ``observation`` of a copy that ended is already the first one of its next
+    episode, and ``final_observation`` holds the one it ended with.
+    """
+
+    observation: np.ndarray  # (B, N, dim) float32
+    reward: np.ndarray  # (B, N) after the reward transform
+    cost: np.ndarray  # (B, N) stage cost J_i of the transition (raw, untransformed)
+    penalty: np.ndarray  # (B, N) collision penalty ("penalty" mode)
+    terminated: np.ndarray  # (B,) bool: collision in "terminate" mode or left the corridor
+    truncated: np.ndarray  # (B,) bool: duration reached or diverged (and not terminated)
+    collided: np.ndarray  # (B,) bool: some UAV collided in this step
+    left_corridor: np.ndarray  # (B,) bool
+    diverged: np.ndarray  # (B,) bool
+    result: StepResult
+    final_observation: np.ndarray | None = None  # (B, N, dim) where autoreset, else None
+    reset: np.ndarray | None = None  # (B,) bool: copies reset after this step (autoreset)
+
+    @property
+    def done(self) -> np.ndarray:
+        """(B,) bool: the copy's episode ended in this step."""
+        return self.terminated | self.truncated
+
+
+class FormationEpisodes:
+    """B copies of a scenario as episodes (see the module docstring for the rules).
+
+    Args:
+        scenario: a validated scenario; ``scenario.episode`` holds the training devices.
+        batch_size: B.
+        autoreset: reset a copy as soon as its episode ends (vectorised training views).
+        fly_on_after_collision: do not end episodes on collisions in ``"terminate"`` mode
+            (evaluation flies every seed to its end and counts the collisions).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        batch_size: int = 1,
+        *,
+        autoreset: bool = False,
+        fly_on_after_collision: bool = False,
+    ) -> None:
+        self.scenario = scenario
+        self.sim = FormationSim(scenario, batch_size=batch_size)
+        self.batch_size = self.sim.batch_size
+        self.n_uav = scenario.n_uav
+        self.u_max = scenario.dynamics.u_max
+        self.autoreset = bool(autoreset)
+        self.fly_on_after_collision = bool(fly_on_after_collision)
+        self.route_start = np.zeros((self.batch_size, 3))  # centroid at t = 0 [m]
+        self.last: EpisodeStep | None = None
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> EpisodeStep:
+        """Start new episodes in every copy, or in those where ``mask`` is True (see
+        :meth:`FormationSim.reset` for ``seed``)."""
+        result = self.sim.reset(seed=seed, mask=mask)
+        reset = np.ones(self.batch_size, dtype=bool) if mask is None else np.asarray(mask)
+        self.route_start[reset] = result.z[reset, :, :3].mean(axis=1)
+        zeros = np.zeros((self.batch_size, self.n_uav))
+        no = np.zeros(self.batch_size, dtype=bool)
+        step = EpisodeStep(
+            observation=observations_of(self.sim, result),
+            reward=zeros,
+            cost=zeros,
+            penalty=zeros,
+            terminated=no,
+            truncated=no,
+            collided=result.collision.any(axis=1),
+            left_corridor=no,
+            diverged=no,
+            result=result,
+        )
+        self.last = step
+        return step
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: np.ndarray) -> EpisodeStep:
+        """One control step of every copy.
+
+        Args:
+            actions: (B, N, 3) normalised actions; finite values, clipped to [-1, 1].
+        """
+        if self.last is None:
+            raise RuntimeError("call reset() before step()")
+        actions = np.asarray(actions)
+        if actions.dtype.kind not in "biuf":
+            raise ValueError(f"actions must be real numbers, got dtype {actions.dtype}")
+        expected = (self.batch_size, self.n_uav, 3)
+        if actions.shape != expected:
+            raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
+        if not np.isfinite(actions).all():
+            copy, agent = np.argwhere(~np.isfinite(actions))[0, :2]
+            raise ValueError(
+                f"actions contain NaN or infinite values (first: copy {copy}, uav_{agent})"
+            )
+        # np.clip for finite values, without its Python wrappers (the sim checks finiteness)
+        clipped = np.minimum(np.maximum(actions.astype(float), -1.0), 1.0)
+        result = self.sim.step(clipped * self.u_max)
+        episode = self.scenario.episode
+        cost = result.cost.total
+        penalty = self.penalties(result)
+        collided = result.collision.any(axis=1)
+        left = self._left_corridor(result) if episode.corridor_width > 0 else _false(cost)
+        terminated = left.copy()
+        if self.scenario.collision.mode == "terminate" and not self.fly_on_after_collision:
+            terminated |= collided
+        diverged = self._diverged(result) & ~terminated
+        truncated = (result.truncated | diverged) & ~terminated
+        step = EpisodeStep(
+            observation=observations_of(self.sim, result),
+            reward=self.reward(cost, penalty),
+            cost=cost,
+            penalty=penalty,
+            terminated=terminated,
+            truncated=truncated,
+            collided=collided,
+            left_corridor=left,
+            diverged=diverged,
+            result=result,
+        )
+        done = step.done
+        if self.autoreset and done.any():
+            step.final_observation = step.observation
+            step.reset = done
+            fresh = self.reset(seed=None, mask=done)
+            step.observation = np.where(done[:, None, None], fresh.observation, step.observation)
+        self.last = step
+        return step
+
+    # ------------------------------------------------------------------ rules
+    def reward(self, cost: np.ndarray, penalty: np.ndarray) -> np.ndarray:
+        """(B, N) reward of a stage cost and penalty through ``episode.reward``."""
+        episode = self.scenario.episode
+        if episode.reward == "raw":
+            return -(cost + penalty)
+        scaled = (cost + penalty) / episode.reward_scale
+        return -scaled if episode.reward == "scaled" else -np.log1p(scaled)
+
+    def penalties(self, result: StepResult) -> np.ndarray:
+        """(B, N) collision penalty of each agent in this step (0 unless mode is "penalty")."""
+        config = self.scenario.collision
+        if config.mode != "penalty":
+            return np.zeros(result.collision.shape)
+        return config.penalty * result.collision
+
+    def _left_corridor(self, result: StepResult) -> np.ndarray:
+        centroid = result.z[..., :3].mean(axis=1)
+        off = route_error(self.scenario.schedule, result.t[:, None], centroid, self.route_start)
+        return off > self.scenario.episode.corridor_width
+
+    def _diverged(self, result: StepResult) -> np.ndarray:
+        episode = self.scenario.episode
+        diverged = _false(result.t)
+        if episode.max_formation_error > 0:
+            formation = self.scenario.formation
+            a = anchored(result.z, self.sim.offsets, formation.mirrored_offsets)[..., :3]
+            spread = np.linalg.norm(a - a.mean(axis=1, keepdims=True), axis=-1)
+            diverged = diverged | (spread.max(axis=1) > episode.max_formation_error)
+        if episode.max_velocity_error > 0:
+            error = np.linalg.norm(result.z[..., 3:] - result.reference_velocity, axis=-1)
+            diverged = diverged | (error.max(axis=1) > episode.max_velocity_error)
+        return diverged
+
+    # ------------------------------------------------------------------ views
+    def observe(self) -> np.ndarray:
+        """(B, N, dim) the agents' current observations."""
+        if self.last is None:
+            raise RuntimeError("call reset() first")
+        return self.last.observation
+
+    def state(self) -> np.ndarray:
+        """(B, 12 N + 1 + N²) the current global state (:func:`global_state`)."""
+        if self.last is None:
+            raise RuntimeError("call reset() first")
+        return global_state(self.sim, self.sim.last)
+
+
+def _false(like: np.ndarray) -> np.ndarray:
+    return np.zeros(like.shape[0], dtype=bool)
