@@ -28,7 +28,7 @@ from uav_formation_env.config_io import save_scenario, with_overrides
 from uav_formation_env.core.observation import decode_observations, observation_dim
 from uav_formation_env.scenarios import make_scenario
 
-INFO_TYPES = {
+RICH_INFO_TYPES = {
     "J": float,
     "cost_terms": dict,
     "disturbance": np.ndarray,
@@ -36,6 +36,26 @@ INFO_TYPES = {
     "reference_velocity": np.ndarray,
     "group": int,
     "neighbours": list,
+    "obstacle_distance": float,
+    "min_separation": float,
+    "collision": bool,
+    "position": np.ndarray,
+    "velocity": np.ndarray,
+    "penalty": float,
+    "t": float,
+}
+INFO_TYPES = {
+    "J": float,
+    "cost_formation": float,
+    "cost_energy": float,
+    "cost_terminal": float,
+    "cost_velocity": float,
+    "cost_separation": float,
+    "disturbance": np.ndarray,
+    "disturbance_estimate": np.ndarray,
+    "reference_velocity": np.ndarray,
+    "group": int,
+    "neighbours": np.ndarray,  # (N,) bool mask
     "obstacle_distance": float,
     "min_separation": float,
     "collision": bool,
@@ -87,21 +107,39 @@ def names(n_uav: int) -> list[str]:
     return [f"uav_{i}" for i in range(n_uav)]
 
 
+def cost_terms(info: dict) -> dict[str, float]:
+    """The named cost terms of an info, numeric (``cost_<term>``) or rich (``cost_terms``)."""
+    if "cost_terms" in info:
+        return info["cost_terms"]
+    return {key[5:]: value for key, value in info.items() if key.startswith("cost_")}
+
+
+def neighbour_names(info: dict, n_uav: int) -> list[str]:
+    """The agents an agent receives from: the numeric info's mask or the rich info's names."""
+    value = info["neighbours"]
+    if isinstance(value, np.ndarray):
+        assert value.shape == (n_uav,) and value.dtype == bool
+        return [names(n_uav)[j] for j in np.flatnonzero(value)]
+    return value
+
+
 def check_infos(infos: dict, n_uav: int) -> None:
     assert set(infos) == set(names(n_uav))
     for agent, info in infos.items():
-        assert set(info) == set(INFO_TYPES), agent
-        for key, kind in INFO_TYPES.items():
+        types = RICH_INFO_TYPES if "cost_terms" in info else INFO_TYPES
+        assert set(info) == set(types), agent
+        for key, kind in types.items():
             assert isinstance(info[key], kind), (agent, key, type(info[key]))
         for key in VECTOR_INFOS:
             assert info[key].shape == (3,), (agent, key)
             assert np.isfinite(info[key]).all(), (agent, key)
-        assert set(info["cost_terms"]) == COST_TERMS
-        assert all(isinstance(v, float) for v in info["cost_terms"].values())
-        assert info["J"] == pytest.approx(sum(info["cost_terms"].values()), rel=1e-12, abs=1e-9)
-        assert info["cost_terms"]["terminal"] == 0.0  # a stage has no terminal term
+        terms = cost_terms(info)
+        assert set(terms) == COST_TERMS
+        assert all(isinstance(v, float) for v in terms.values())
+        assert info["J"] == pytest.approx(sum(terms.values()), rel=1e-12, abs=1e-9)
+        assert terms["terminal"] == 0.0  # a stage has no terminal term
         assert np.isfinite(info["J"]) and info["J"] >= 0.0
-        assert set(info["neighbours"]) <= set(names(n_uav)) - {agent}
+        assert set(neighbour_names(info, n_uav)) <= set(names(n_uav)) - {agent}
         assert np.isfinite(info["min_separation"]) and info["min_separation"] >= 0.0
         assert not np.isnan(info["obstacle_distance"])  # +inf without obstacles
 
@@ -120,7 +158,8 @@ def check_state_layout(state: np.ndarray, infos: dict, n_uav: int) -> None:
         np.testing.assert_allclose(part, expected, rtol=1e-6, atol=atol, err_msg=key)
     adjacency = state[12 * n_uav + 1 :].reshape(n_uav, n_uav)
     for i, agent in enumerate(names(n_uav)):
-        assert infos[agent]["neighbours"] == [names(n_uav)[j] for j in np.flatnonzero(adjacency[i])]
+        expected = [names(n_uav)[j] for j in np.flatnonzero(adjacency[i])]
+        assert neighbour_names(infos[agent], n_uav) == expected
 
 
 # ---------------------------------------------------------------------------- the checker matrix
@@ -188,7 +227,7 @@ def test_state_and_step_contract_on_matrix(combo):
                 assert rewards[agent] == -info["J"]
             # energy term: r ||u_n||^2 with u_n = action * u_max
             u_n = actions[agent].astype(float) * scenario.dynamics.u_max
-            assert info["cost_terms"]["energy"] == pytest.approx(
+            assert cost_terms(info)["energy"] == pytest.approx(
                 scenario.cost.r * float(u_n @ u_n), rel=1e-12
             )
         collided = any(infos[a]["collision"] for a in names(n_uav))
@@ -412,14 +451,17 @@ def test_aec_view_truncates_and_removes_agents():
 
 
 # ------------------------------------------------------------------------ infos and observations
-def test_info_keys_types_and_paper_neighbours():
-    e = parallel_env()
+@pytest.mark.parametrize("info_mode", ["numeric", "rich"])
+def test_info_keys_types_and_paper_neighbours(info_mode: str):
+    e = parallel_env(info_mode=info_mode)
     _, infos = e.reset(seed=0)
     check_infos(infos, 5)
-    assert infos["uav_0"]["neighbours"] == ["uav_1", "uav_3", "uav_4"]
+    assert ("cost_terms" in infos["uav_0"]) == (info_mode == "rich")
+    assert neighbour_names(infos["uav_0"], 5) == ["uav_1", "uav_3", "uav_4"]
     adjacency = np.asarray(e.scenario.formation.adjacency)
     for i, agent in enumerate(e.possible_agents):
-        assert infos[agent]["neighbours"] == [f"uav_{j}" for j in np.flatnonzero(adjacency[i])]
+        expected = [f"uav_{j}" for j in np.flatnonzero(adjacency[i])]
+        assert neighbour_names(infos[agent], 5) == expected
         assert infos[agent]["t"] == 0.0
         assert infos[agent]["group"] == 0
         assert infos[agent]["reference_velocity"].tolist() == [20.0, 0.0, 0.0]
@@ -458,7 +500,7 @@ def test_observation_decodes_to_infos(n_uav):
             assert decoded.time_fraction == pytest.approx(info["t"] / e.scenario.duration)
             others = [f"uav_{j}" for j in range(n_uav) if j != i]
             flags = [o for o, flag in zip(others, decoded.neighbour) if flag]
-            assert flags == info["neighbours"]
+            assert flags == neighbour_names(info, n_uav)
             assert obs[agent][18] == pytest.approx(info["min_separation"] / 100.0, rel=1e-6)
             # paper obstacles: present flag and distance to the nearest surface / 100 m
             assert obs[agent][17] == 1.0

@@ -199,7 +199,7 @@ def test_env_infos_do_not_alias_the_simulator() -> None:
     _, _, _, _, infos = env.step(actions)
     position = env.sim.z[0, 0, :3].copy()
     infos["uav_0"]["position"][:] = 1e9
-    infos["uav_0"]["neighbours"].append("nobody")
+    infos["uav_0"]["neighbours"][:] = True
     assert np.array_equal(env.sim.z[0, 0, :3], position)
     _, _, _, _, infos = env.step(actions)
-    assert "nobody" not in infos["uav_0"]["neighbours"]
+    assert not infos["uav_0"]["neighbours"][0]  # a UAV never receives from itself

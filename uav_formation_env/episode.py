@@ -293,7 +293,7 @@ class FormationEpisodes:
 
     def _left_corridor(self, result: StepResult) -> np.ndarray:
         centroid = result.z[..., :3].mean(axis=1)
-        off = route_error(self.scenario.schedule, result.t[:, None], centroid, self.route_start)
+        off = route_error(self.scenario.schedule, result.t, centroid, self.route_start)
         return off > self.scenario.episode.corridor_width
 
     def _diverged(self, result: StepResult) -> np.ndarray:

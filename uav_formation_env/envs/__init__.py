@@ -26,6 +26,7 @@ def resolve_with_overrides(
 def parallel_env(
     scenario: str | Path | Scenario | Mapping[str, Any] = "paper",
     render_mode: str | None = None,
+    info_mode: str = "numeric",
     **overrides: Any,
 ) -> UAVFormationParallelEnv:
     """The PettingZoo ParallelEnv ``uav_formation_v0``.
@@ -33,21 +34,26 @@ def parallel_env(
     Args:
         scenario: ``"paper"`` (default), a YAML path, a mapping or a :class:`Scenario`.
         render_mode: None, ``"rgb_array"`` or ``"human"``.
+        info_mode: ``"numeric"`` (numbers and fixed-shape arrays) or ``"rich"`` (see the env).
         **overrides: single fields, validated like the scenario: nested mappings
             (``observer={"enabled": False}``) or double-underscore paths
-            (``observer__enabled=False``).
+            (``observer__enabled=False``), e.g. the training devices of the episode layer
+            (``episode__reward="log1p"``, ``episode__corridor_width=200.0``).
     """
-    return UAVFormationParallelEnv(resolve_with_overrides(scenario, overrides), render_mode)
+    return UAVFormationParallelEnv(
+        resolve_with_overrides(scenario, overrides), render_mode, info_mode
+    )
 
 
 def env(
     scenario: str | Path | Scenario | Mapping[str, Any] = "paper",
     render_mode: str | None = None,
+    info_mode: str = "numeric",
     **overrides: Any,
 ) -> UAVFormationAECEnv:
     """The AEC view of :func:`parallel_env` (PettingZoo's ``parallel_to_aec``, with each action
     checked on its agent's turn: a rejected action leaves the env usable)."""
-    return UAVFormationAECEnv(parallel_env(scenario, render_mode, **overrides))
+    return UAVFormationAECEnv(parallel_env(scenario, render_mode, info_mode, **overrides))
 
 
 def vec_env(

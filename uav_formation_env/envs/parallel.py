@@ -27,11 +27,16 @@ penalty, ``"terminate"`` ends the episode for every agent when any UAV collides 
 ``collision.uav_distance`` to another, or inside an obstacle). With rewards that are always
 negative, ``"terminate"`` makes an early crash attractive to a learner; prefer ``"penalty"``.
 
-**Info** of agent i: ``J`` (stage cost), ``cost_terms`` (formation, energy, terminal, velocity,
-separation), ``disturbance`` and ``disturbance_estimate`` [m/s²], ``reference_velocity`` [m/s],
-``group`` (sub-formation id), ``neighbours`` (agents it receives from this step),
-``obstacle_distance`` (to the nearest obstacle surface [m]), ``min_separation`` (to the nearest
-other UAV [m]), ``collision``, ``position`` [m], ``velocity`` [m/s], ``penalty``, ``t`` [s].
+**Info** of agent i (``info_mode="numeric"``, the default: every value a number or a fixed-shape
+array, so that TorchRL, BenchMARL and RLlib can stack them): ``J`` (stage cost, the raw J_i
+whatever the reward transform), ``cost_formation``, ``cost_energy``, ``cost_terminal``,
+``cost_velocity``, ``cost_separation`` (its terms), ``neighbours`` ((N,) bool mask of the agents it
+receives from this step), ``disturbance`` and ``disturbance_estimate`` (3,) [m/s²],
+``reference_velocity`` (3,) [m/s], ``group`` (sub-formation id), ``obstacle_distance`` (to the
+nearest obstacle surface [m], inf without obstacles), ``min_separation`` (to the nearest other UAV
+[m]), ``collision``, ``position`` (3,) [m], ``velocity`` (3,) [m/s], ``penalty``, ``t`` [s].
+``info_mode="rich"`` gives ``cost_terms`` (a dict of the terms) and ``neighbours`` (a list of
+agent names) instead.
 
 **State** (``state()``): positions / 100 m, velocities / 20 m/s, reference velocities / 20 m/s,
 estimates / 0.5 m/s², t / duration, and the adjacency matrix, flattened (float32).
@@ -50,6 +55,7 @@ from uav_formation_env.seeding import check_seed
 from uav_formation_env.sim import StepResult
 
 RENDER_MODES = ["rgb_array", "human"]
+INFO_MODES = ("numeric", "rich")
 
 
 def agent_names(n_uav: int) -> list[str]:
@@ -63,6 +69,8 @@ class UAVFormationParallelEnv(ParallelEnv):
     Args:
         scenario: a validated scenario.
         render_mode: None, "rgb_array" or "human".
+        info_mode: ``"numeric"`` (every info value a number or a fixed-shape array, as TorchRL
+            and RLlib need) or ``"rich"`` (cost terms as a dict, neighbours as agent names).
     """
 
     metadata = {
@@ -72,11 +80,16 @@ class UAVFormationParallelEnv(ParallelEnv):
         "is_parallelizable": True,
     }
 
-    def __init__(self, scenario: Scenario, render_mode: str | None = None) -> None:
+    def __init__(
+        self, scenario: Scenario, render_mode: str | None = None, info_mode: str = "numeric"
+    ) -> None:
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(
                 f"render_mode must be None or one of {RENDER_MODES}, got {render_mode!r}"
             )
+        if info_mode not in INFO_MODES:
+            raise ValueError(f"info_mode must be one of {INFO_MODES}, got {info_mode!r}")
+        self.info_mode = info_mode
         self.scenario = scenario
         self.render_mode = render_mode
         self.episodes = FormationEpisodes(scenario, batch_size=1)
@@ -159,22 +172,38 @@ class UAVFormationParallelEnv(ParallelEnv):
             total = r.cost.total[0]
         total = total.tolist()
         terms = {name: value[0].tolist() for name, value in r.cost.as_dict().items()}
-        neighbours = self._neighbour_names(r.adjacency[0])
         z = r.z[0].copy()
         disturbance, estimate = r.disturbance[0].copy(), r.estimate[0].copy()
         reference = r.reference_velocity[0].copy()
         groups, collision = r.groups[0].tolist(), r.collision[0].tolist()
         obstacle, separation = r.obstacle_distance[0].tolist(), r.min_separation[0].tolist()
         penalty, t = penalty.tolist(), float(r.t[0])
+        if self.info_mode == "rich":
+            neighbours = self._neighbour_names(r.adjacency[0])
+            per_agent = [
+                {
+                    "cost_terms": {name: values[i] for name, values in terms.items()},
+                    "neighbours": list(neighbours[i]),
+                }
+                for i in range(len(names))
+            ]
+        else:
+            mask = r.adjacency[0] != 0
+            per_agent = [
+                {
+                    **{f"cost_{name}": values[i] for name, values in terms.items()},
+                    "neighbours": mask[i],
+                }
+                for i in range(len(names))
+            ]
         return {
             agent: {
                 "J": total[i],
-                "cost_terms": {name: values[i] for name, values in terms.items()},
+                **per_agent[i],
                 "disturbance": disturbance[i],
                 "disturbance_estimate": estimate[i],
                 "reference_velocity": reference[i],
                 "group": groups[i],
-                "neighbours": list(neighbours[i]),
                 "obstacle_distance": obstacle[i],
                 "min_separation": separation[i],
                 "collision": collision[i],
