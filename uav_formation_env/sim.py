@@ -117,8 +117,20 @@ class FormationSim:
         self.disturbance = Disturbance(scenario.disturbance, self.n_uav, self.dt)
         self._rows = np.arange(self.batch_size)
         self._n_steps = scenario.n_steps
-        self._rngs: list[np.random.Generator] = []
-        self.last: StepResult | None = None
+        B, N = self.batch_size, self.n_uav
+        # The state of every copy, declared here and (re)initialised per copy by reset().
+        self._rngs = [np.random.default_rng() for _ in range(B)]  # per copy: disturbance noise
+        self._seed_streams: list[np.random.Generator | None] = [None] * B  # follow-up seeds
+        self.z = np.zeros((B, N, 6))  # UAV states [m, m/s]
+        self.gust = np.zeros((B, N, 3))  # Gauss-Markov gust [m/s^2]
+        self.noise = np.zeros((B, NOISE_BLOCK, N, self.disturbance.noise_dim))  # drawn noise
+        self.noise_pos = np.zeros(B, dtype=np.int64)  # next unused noise step per copy
+        self._noise_left = NOISE_BLOCK  # steps until some copy needs a new noise block
+        self.t = np.zeros(B)  # time since reset [s]
+        self.steps = np.zeros(B, dtype=np.int64)  # control steps since reset
+        self.observer: ObserverState = observer_init(self.z[..., 3:])
+        self.topology = topology.init_topology(B, N, len(self.obstacle_centers))
+        self.last: StepResult | None = None  # None until the first reset
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> StepResult:
@@ -146,17 +158,6 @@ class FormationSim:
             raise ValueError(f"mask must have shape ({B},), got {mask.shape}")
         indices = np.flatnonzero(mask)
         seeds = _seeds_for(seed, len(indices))
-        if self.last is None:
-            self._rngs = [np.random.default_rng() for _ in range(B)]
-            self._seed_streams: list[np.random.Generator | None] = [None] * B
-            self.z = np.zeros((B, N, 6))
-            self.gust = np.zeros((B, N, 3))
-            self.noise = np.zeros((B, NOISE_BLOCK, N, self.disturbance.noise_dim))
-            self.noise_pos = np.zeros(B, dtype=np.int64)
-            self.t = np.zeros(B)
-            self.steps = np.zeros(B, dtype=np.int64)
-            self.observer = observer_init(self.z[..., 3:])
-            self.topology = topology.init_topology(B, N, len(self.obstacle_centers))
         low = np.asarray(cfg.initial.position_low)
         high = np.asarray(cfg.initial.position_high)
         for b, s in zip(indices, seeds):

@@ -23,6 +23,7 @@ import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.envs.gym_vector import per_agent
 from uav_formation_env.envs.parallel import UAVFormationParallelEnv
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.seeding import check_seed
@@ -89,6 +90,7 @@ class FormationVecEnv(VecEnv):
         actions = self._actions.reshape(self.num_copies, self.n_uav, 3)
         self._actions = None
         step = self.episodes.step(actions)
+        observations, rewards, terminated, truncated = per_agent(step)
         infos: list[dict[str, Any]] = [
             {"J": float(j), "collision": bool(c)}
             for j, c in zip(step.cost.ravel(), step.result.collision.ravel())
@@ -99,8 +101,7 @@ class FormationVecEnv(VecEnv):
                     info = infos[b * self.n_uav + i]
                     info["terminal_observation"] = step.final_observation[b, i].copy()
                     info["TimeLimit.truncated"] = bool(step.truncated[b])
-        dones = np.repeat(step.done, self.n_uav)
-        return self._flat(step.observation), step.reward.ravel().astype(np.float32), dones, infos
+        return observations, rewards.astype(np.float32), terminated | truncated, infos
 
     def _flat(self, obs: np.ndarray) -> np.ndarray:
         return obs.reshape(self.num_envs, -1)
