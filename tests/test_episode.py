@@ -199,3 +199,54 @@ def test_bad_actions_are_refused_by_the_layer() -> None:
 def test_episode_options_are_validated(field: str, value, pattern: str) -> None:
     with pytest.raises(ValueError, match=pattern):
         scenario(**{field: value})
+
+
+def fly_from_zero(seed: int, steps: int, then: np.ndarray) -> np.ndarray:
+    """A copy flown from t = 0 by the consensus PD for ``steps`` steps, then by ``then`` (K, N, 3)
+    normalised actions: its states after each of those K steps (K, N, 6)."""
+    from uav_formation_env.policies.heuristic import consensus_pd
+    from uav_formation_env.sim import FormationSim
+
+    sim = FormationSim(PAPER, 1)
+    sim.reset(seed=seed)
+    for _ in range(steps):
+        last = sim.last
+        sim.step(consensus_pd(sim.z, last.reference_velocity, last.adjacency, sim.offsets, 5.0))
+    return np.stack([sim.step(a[None] * 5.0).z[0] for a in then])
+
+
+def test_staggered_start_continues_the_controllers_episode_exactly() -> None:
+    episodes = FormationEpisodes(scenario(start="staggered"), 4)
+    first = episodes.reset(seed=20)
+    assert first.result.step.tolist() == [0, 250, 500, 750]
+    np.testing.assert_allclose(first.observation[:, 0, 12], [0.0, 0.25, 0.5, 0.75])
+    then = np.random.default_rng(0).uniform(-1, 1, (30, 4, 5, 3))
+    states = np.stack([episodes.step(a).result.z for a in then])  # (30, 4, 5, 6)
+    for b, start in enumerate([0, 250, 500, 750]):
+        # copy b is seed 20 + b flown to its start by the controller, noise and all
+        np.testing.assert_array_equal(states[:, b], fly_from_zero(20 + b, start, then[:, b]))
+    # later resets start at t = 0 again
+    assert episodes.reset(seed=20).result.step.tolist() == [0, 0, 0, 0]
+
+
+def test_random_start_is_named_by_the_seed_alone() -> None:
+    batch = FormationEpisodes(scenario(start="random"), 3)
+    starts = batch.reset(seed=[7, 8, 9]).result.step
+    assert len(set(starts.tolist())) == 3 and (starts < PAPER.n_steps).all()
+    alone = FormationEpisodes(scenario(start="random"), 1).reset(seed=8)
+    assert alone.result.step[0] == starts[1]
+    np.testing.assert_array_equal(alone.result.z[0], batch.last.result.z[1])
+    np.testing.assert_array_equal(alone.observation[0], batch.last.observation[1])
+
+
+def test_random_start_on_autoreset_and_truncation_at_the_duration() -> None:
+    episodes = FormationEpisodes(scenario(start="random"), 2, autoreset=True)
+    first = episodes.reset(seed=[1, 2]).result.step.copy()
+    remaining = PAPER.n_steps - first
+    shortest = int(remaining.min())
+    for _ in range(shortest):
+        step = episodes.step(np.zeros((2, 5, 3)))
+    ended = remaining == shortest
+    assert step.truncated.tolist() == ended.tolist()  # the duration still ends the episode
+    new_start = episodes.sim.steps[ended]
+    assert (new_start < PAPER.n_steps).all()  # the next episode started somewhere else again

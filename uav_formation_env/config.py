@@ -435,6 +435,8 @@ class CollisionConfig:
 
 
 REWARD_TRANSFORMS = ("raw", "scaled", "log1p")
+START_MODES = ("zero", "random", "staggered")
+START_CONTROLLERS = ("heuristic",)
 
 
 @dataclass(frozen=True)
@@ -452,6 +454,12 @@ class EpisodeConfig:
       reference velocity is *truncated* (neither rewarded nor punished for diverging); 0 = off.
     - Mission corridor: a copy whose formation centroid is more than ``corridor_width`` from the
       preset route (horizontally) is *terminated*, as a failed mission; 0 = off.
+    - Start along the mission: ``start="zero"`` starts every episode at t = 0; ``"random"``
+      starts each episode at a step drawn uniformly in [0, T) from the copy's generator,
+      ``"staggered"`` spreads the copies of the first reset evenly over [0, T) (copy b at step
+      b T / B; later resets start at 0). The state there is the one the ``start_controller``
+      (the consensus PD ``"heuristic"``) reaches by flying the episode from t = 0, so that short
+      rollouts see both obstacles and every turn.
     """
 
     reward: str = "raw"  # "raw", "scaled" or "log1p"
@@ -459,6 +467,8 @@ class EpisodeConfig:
     max_formation_error: float = 0.0  # divergence bound on a UAV's formation error [m]; 0 = off
     max_velocity_error: float = 0.0  # divergence bound on |v_i - v^d_i| [m/s]; 0 = off
     corridor_width: float = 0.0  # half-width of the corridor around the preset route [m]; 0 = off
+    start: str = "zero"  # "zero", "random" or "staggered": where along the mission episodes start
+    start_controller: str = "heuristic"  # flies a copy to its start step
 
     def __post_init__(self) -> None:
         _require(
@@ -470,6 +480,16 @@ class EpisodeConfig:
         _non_negative(self.max_formation_error, "episode.max_formation_error")
         _non_negative(self.max_velocity_error, "episode.max_velocity_error")
         _non_negative(self.corridor_width, "episode.corridor_width")
+        _require(
+            self.start in START_MODES,
+            "episode.start",
+            f"must be one of {START_MODES}, got {self.start!r}",
+        )
+        _require(
+            self.start_controller in START_CONTROLLERS,
+            "episode.start_controller",
+            f"must be one of {START_CONTROLLERS}, got {self.start_controller!r}",
+        )
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,8 @@ Table of the episode options (``scenario.episode``; units; all off by default):
 | ``max_formation_error`` | 0 (off) | m | truncate a copy with a UAV this far from its slot |
 | ``max_velocity_error`` | 0 (off) | m/s | truncate a copy with a UAV this far from its reference velocity |
 | ``corridor_width`` | 0 (off) | m | terminate a copy whose centroid leaves the corridor around the preset route |
+| ``start`` | ``"zero"`` | - | ``"random"``: each episode starts at a step drawn in [0, T); ``"staggered"``: the first reset spreads copy b to step b T / B |
+| ``start_controller`` | ``"heuristic"`` | - | the controller that flies a copy from t = 0 to its start step |
 
 ``fly_on_after_collision=True`` (the evaluation runner's rule, a constructor option) keeps flying a
 copy after a collision in ``"terminate"`` mode, so that every seed is flown to its end and its
@@ -48,6 +50,7 @@ from uav_formation_env.core.observation import (
     build_observations,
 )
 from uav_formation_env.core.reference import route_error
+from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.sim import FormationSim, SeedLike, StepResult
 
 __all__ = [
@@ -196,6 +199,8 @@ class FormationEpisodes:
         self.fly_on_after_collision = bool(fly_on_after_collision)
         self.route_start = np.zeros((self.batch_size, 3))  # centroid at t = 0 [m]
         self.last: EpisodeStep | None = None
+        self._flight: FormationSim | None = None  # flies copies to their start step
+        self._staggered = False
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> EpisodeStep:
@@ -204,6 +209,9 @@ class FormationEpisodes:
         result = self.sim.reset(seed=seed, mask=mask)
         reset = np.ones(self.batch_size, dtype=bool) if mask is None else np.asarray(mask)
         self.route_start[reset] = result.z[reset, :, :3].mean(axis=1)
+        starts = self._start_steps(reset)
+        if starts.any():
+            result = self._fly_to(starts)
         zeros = np.zeros((self.batch_size, self.n_uav))
         no = np.zeros(self.batch_size, dtype=bool)
         step = EpisodeStep(
@@ -274,6 +282,47 @@ class FormationEpisodes:
             step.observation = np.where(done[:, None, None], fresh.observation, step.observation)
         self.last = step
         return step
+
+    # ------------------------------------------------------------------ start along the mission
+    def _start_steps(self, reset: np.ndarray) -> np.ndarray:
+        """(B,) the step each reset copy starts at (0 elsewhere), by ``episode.start``."""
+        mode, n_steps = self.scenario.episode.start, self.scenario.n_steps
+        starts = np.zeros(self.batch_size, dtype=np.int64)
+        if mode == "random":
+            for b in np.flatnonzero(reset):
+                starts[b] = self.sim.generator(b).integers(n_steps)
+        elif mode == "staggered" and not self._staggered and reset.all():
+            self._staggered = True
+            starts = np.arange(self.batch_size) * n_steps // self.batch_size
+        return starts
+
+    def _fly_to(self, starts: np.ndarray) -> StepResult:
+        """Fly every copy with ``starts > 0`` from its fresh reset to that step with the start
+        controller (in a second simulator, so that the other copies do not move), then adopt
+        it. Returns the simulator's :class:`StepResult` after the adoption."""
+        if self._flight is None:
+            self._flight = FormationSim(self.scenario, self.batch_size)
+            self._flight.reset()
+        flight, cfg = self._flight, self.scenario
+        pending = starts > 0
+        flight.adopt(pending, self.sim)
+        result = self.sim.last
+        for k in range(1, int(starts.max()) + 1):
+            last = flight.last
+            u = consensus_pd(
+                flight.z,
+                last.reference_velocity,
+                last.adjacency,
+                self.sim.offsets,
+                self.u_max,
+                mirrored=cfg.formation.mirrored_offsets,
+            )
+            flight.step(u)
+            arrived = pending & (starts == k)
+            if arrived.any():
+                result = self.sim.adopt(arrived, flight)
+                pending &= ~arrived
+        return result
 
     # ------------------------------------------------------------------ rules
     def reward(self, cost: np.ndarray, penalty: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ Order of one control step (docs/model.md §1.4, §3.3, §3.4, §7):
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, is_dataclass, replace
 
@@ -299,6 +300,38 @@ class FormationSim:
             activated=out.activated,
             restored=out.restored,
         )
+
+    # ------------------------------------------------------------------ copies
+    def adopt(self, mask: np.ndarray, source: FormationSim) -> StepResult:
+        """Take over the whole state of the ``mask`` copies from ``source`` (same scenario and
+        batch size): positions, observer, topology, time, noise, random streams.
+
+        Used to start episodes part-way along the mission: a copy is flown there in a second
+        simulator and adopted. Copy b of ``source`` becomes copy b here.
+
+        Returns:
+            The :class:`StepResult` of every copy after the adoption.
+        """
+        mask = np.asarray(mask, dtype=bool)
+        if source.batch_size != self.batch_size or source.scenario != self.scenario:
+            raise ValueError("adopt needs a source simulator of the same scenario and batch size")
+        if source.last is None or self.last is None:
+            raise RuntimeError("both simulators must have been reset before adopt()")
+        for name in ("z", "gust", "noise", "noise_pos", "t", "steps"):
+            getattr(self, name)[mask] = getattr(source, name)[mask]
+        self.observer = _where_batch(mask, source.observer, self.observer)
+        self.topology = _where_batch(mask, source.topology, self.topology)
+        for b in np.flatnonzero(mask):
+            # copies, not the objects: the source may go on drawing from its own
+            self._rngs[b] = copy.deepcopy(source._rngs[b])
+            self._seed_streams[b] = copy.deepcopy(source._seed_streams[b])
+        self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
+        self.last = _where_batch(mask, source.last, self.last)
+        return self.last
+
+    def generator(self, copy: int) -> np.random.Generator:
+        """The random generator of one copy (seeded at its last reset)."""
+        return self._rngs[copy]
 
     # ------------------------------------------------------------------ queries
     def distances(self, pair: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
