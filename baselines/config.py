@@ -24,11 +24,15 @@ TRAINING_DEFAULTS: dict[str, Any] = {
     "policy": "MlpPolicy",
     "copies": 8,  # scenario copies B; the VecEnv has B * N entries
     "normalize": {"norm_obs": True, "norm_reward": True, "clip_obs": 10.0, "clip_reward": 10.0},
-    "reward_transform": "none",  # "none": -J; "log": -log(1 + J / J0); "sqrt": -sqrt(J / J0)
-    "reward_scale": 100.0,  # J0 of the log transform [-]
-    "stagger_start": True,  # spread the copies' episode phases at the first reset
-    # restart a copy that strays beyond these bounds (None: never), see wrappers.DivergenceReset
-    "divergence_reset": {"max_spread": 100.0, "max_velocity_error": 40.0},
+    # the episode layer's training options (scenario.episode, see uav_formation_env.episode):
+    # reward transform, divergence truncation, start along the mission, mission corridor
+    "episode": {
+        "reward": "raw",
+        "reward_scale": 100.0,
+        "max_formation_error": 100.0,
+        "max_velocity_error": 40.0,
+        "start": "staggered",
+    },
     "env_overrides": {},  # scenario field overrides for training only (e.g. collision.mode)
     "eval_freq": 50_000,  # agent-steps between evaluations (0: none)
     "eval_seeds": [1000, 1001, 1002, 1003],  # seeds of the periodic evaluation episodes

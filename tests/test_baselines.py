@@ -39,10 +39,8 @@ from uav_formation_baselines.evaluate import main as evaluate_main  # noqa: E402
 from uav_formation_baselines.plots import learning_curve  # noqa: E402
 from uav_formation_baselines.train import main as train_main  # noqa: E402
 from uav_formation_baselines.wrappers import (  # noqa: E402
-    DivergenceReset,
-    RewardTransform,
-    StaggeredReset,
     make_training_env,
+    training_scenario,
 )
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides  # noqa: E402
 from uav_formation_env.envs.vector import FormationVecEnv  # noqa: E402
@@ -107,51 +105,24 @@ def test_set_overrides_parse_yaml_and_reject_unknown_keys():
 
 
 # ------------------------------------------------------------------------- training stack
-def test_reward_transform_is_monotone_and_log_like():
-    venv = FormationVecEnv(short_scenario(), 1)
-    wrapped = RewardTransform(venv, "log", scale=100.0)
+def test_training_options_are_the_episode_layers():
+    """The stack sets scenario.episode; the layer applies it (reward transform, divergence)."""
+    training = {
+        "copies": 2,
+        "episode": {"reward": "log1p", "reward_scale": 100.0, "max_formation_error": 1e-3},
+        "env_overrides": {"collision": {"mode": "penalty"}},
+    }
+    scenario = training_scenario(short_scenario(), training)
+    assert scenario.episode.reward == "log1p" and scenario.collision.mode == "penalty"
+    assert scenario.episode.max_velocity_error == 0.0  # untouched options keep their defaults
+    venv = FormationVecEnv(scenario, 2)
     venv.seed(0)
-    wrapped.reset()
-    _, raw, _, infos = venv.step(np.zeros((venv.num_envs, 3)))
+    venv.reset()
+    _, rewards, dones, infos = venv.step(np.zeros((venv.num_envs, 3)))
     cost = np.array([info["J"] for info in infos])
-    assert np.allclose(-raw, cost, rtol=1e-5)
-    wrapped.step_async(np.zeros((venv.num_envs, 3)))
-    _, shaped, _, infos = wrapped.step_wait()
-    cost = np.array([info["J"] for info in infos])
-    assert np.allclose(shaped, -np.log1p(cost / 100.0), rtol=1e-5)
-    with pytest.raises(ValueError, match="reward_transform"):
-        RewardTransform(venv, "square")
-
-
-def test_staggered_reset_spreads_episode_phases():
-    scenario = short_scenario()
-    base = FormationVecEnv(scenario, 4)
-    env = StaggeredReset(base)
-    env.seed(0)
-    obs = env.reset()
-    assert base.sim.steps.tolist() == [0, 5, 10, 15]  # b * T / B of a 20-step episode
-    expected = observations_of(base.sim, base.sim.last).reshape(base.num_envs, -1)
-    assert np.array_equal(obs, expected)
-    for _ in range(6):  # copy 3 truncates at step 20 and restarts; the others keep their phase
-        _, _, dones, _ = env.step(np.zeros((base.num_envs, 3)))
-    assert base.sim.steps.tolist() == [6, 11, 16, 1]
-    assert env.reset() is not None and base.sim.steps.tolist() == [0, 0, 0, 0]  # later: plain
-
-
-def test_divergence_reset_restarts_copies_off_course():
-    base = FormationVecEnv(short_scenario(), 2)
-    strict = DivergenceReset(base, max_spread=1e-3, max_velocity_error=1e3)
-    strict.seed(0)
-    strict.reset()
-    obs, _, dones, infos = strict.step(np.zeros((base.num_envs, 3)))
-    assert dones.all() and strict.resets == 2  # the random start box is > 1 mm off formation
-    assert all(info["TimeLimit.truncated"] and "terminal_observation" in info for info in infos)
-    assert base.sim.steps.tolist() == [0, 0]
-    assert np.array_equal(obs, observations_of(base.sim, base.sim.last).reshape(6, -1))
-    lenient = DivergenceReset(base, max_spread=1e4, max_velocity_error=1e4)
-    lenient.reset()
-    _, _, dones, _ = lenient.step(np.zeros((base.num_envs, 3)))
-    assert not dones.any() and lenient.resets == 0
+    np.testing.assert_allclose(rewards, -np.log1p(cost / 100.0), rtol=1e-5)
+    # the random start box is > 1 mm off formation: every copy diverges and is truncated
+    assert dones.all() and all(info["TimeLimit.truncated"] for info in infos)
 
 
 def test_training_stack_from_defaults():
