@@ -56,6 +56,7 @@ from uav_formation_env.sim import FormationSim, SeedLike, StepResult
 __all__ = [
     "EpisodeStep",
     "FormationEpisodes",
+    "StepResult",
     "global_state",
     "observations_of",
     "validate_action",
@@ -169,6 +170,12 @@ class EpisodeStep:
     def done(self) -> np.ndarray:
         """(B,) bool: the copy's episode ended in this step."""
         return self.terminated | self.truncated
+
+    @property
+    def team_reward(self) -> np.ndarray:
+        """(B,) the centralised views' reward: the mean over agents, so that its scale does not
+        grow with N."""
+        return self.reward.mean(axis=1)
 
 
 class FormationEpisodes:

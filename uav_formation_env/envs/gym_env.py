@@ -67,7 +67,7 @@ class FormationGymEnv(gymnasium.Env):
             )
         per_agent = {a: action[3 * i : 3 * i + 3] for i, a in enumerate(self._agents)}
         obs, rewards, terms, truncs, infos = self.parallel.step(per_agent)
-        reward = float(np.mean([rewards[a] for a in self._agents]))
+        reward = float(self.parallel.episodes.last.team_reward[0])
         info = {
             "J": np.array([infos[a]["J"] for a in self._agents]),
             "collision": np.array([infos[a]["collision"] for a in self._agents]),

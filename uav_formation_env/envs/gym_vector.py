@@ -129,7 +129,7 @@ class FormationVectorEnv(_BatchedView):
             self._final(infos, step.done, step.final_observation.reshape(self.num_envs, -1))
         return (
             step.observation.reshape(self.num_envs, -1),
-            step.reward.mean(axis=1),
+            step.team_reward,
             step.terminated.copy(),
             step.truncated.copy(),
             infos,

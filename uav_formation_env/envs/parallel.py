@@ -50,9 +50,8 @@ from pettingzoo import ParallelEnv
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.observation import OBSERVATION_BOUND, observation_dim
-from uav_formation_env.episode import FormationEpisodes, validate_actions
+from uav_formation_env.episode import FormationEpisodes, StepResult, validate_actions
 from uav_formation_env.seeding import check_seed
-from uav_formation_env.sim import StepResult
 
 RENDER_MODES = ["rgb_array", "human"]
 INFO_MODES = ("numeric", "rich")
