@@ -208,6 +208,14 @@ class FormationEpisodes:
         self.last: EpisodeStep | None = None
         self._flight: FormationSim | None = None  # flies copies to their start step
         self._staggered = False
+        # which rules are on, decided once: a plain step allocates nothing for the others
+        episode, collision = scenario.episode, scenario.collision
+        self._penalty_mode = collision.mode == "penalty"
+        self._end_on_collision = collision.mode == "terminate" and not self.fly_on_after_collision
+        self._corridor = episode.corridor_width > 0
+        self._divergence = episode.max_formation_error > 0 or episode.max_velocity_error > 0
+        self._no_copy = _read_only(np.zeros(self.batch_size, dtype=bool))
+        self._no_penalty = _read_only(np.zeros((self.batch_size, self.n_uav)))
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> EpisodeStep:
@@ -259,15 +267,12 @@ class FormationEpisodes:
         # np.clip for finite values, without its Python wrappers (the sim checks finiteness)
         clipped = np.minimum(np.maximum(actions.astype(float), -1.0), 1.0)
         result = self.sim.step(clipped * self.u_max)
-        episode = self.scenario.episode
         cost = result.cost.total
         penalty = self.penalties(result)
         collided = result.collision.any(axis=1)
-        left = self._left_corridor(result) if episode.corridor_width > 0 else _false(cost)
-        terminated = left.copy()
-        if self.scenario.collision.mode == "terminate" and not self.fly_on_after_collision:
-            terminated |= collided
-        diverged = self._diverged(result) & ~terminated
+        left = self._left_corridor(result) if self._corridor else self._no_copy
+        terminated = left | collided if self._end_on_collision else left
+        diverged = self._diverged(result) & ~terminated if self._divergence else self._no_copy
         truncated = (result.truncated | diverged) & ~terminated
         step = EpisodeStep(
             observation=observations_of(self.sim, result),
@@ -336,16 +341,15 @@ class FormationEpisodes:
         """(B, N) reward of a stage cost and penalty through ``episode.reward``."""
         episode = self.scenario.episode
         if episode.reward == "raw":
-            return -(cost + penalty)
+            return -(cost + penalty) if self._penalty_mode else -cost
         scaled = (cost + penalty) / episode.reward_scale
         return -scaled if episode.reward == "scaled" else -np.log1p(scaled)
 
     def penalties(self, result: StepResult) -> np.ndarray:
         """(B, N) collision penalty of each agent in this step (0 unless mode is "penalty")."""
-        config = self.scenario.collision
-        if config.mode != "penalty":
-            return np.zeros(result.collision.shape)
-        return config.penalty * result.collision
+        if not self._penalty_mode:
+            return self._no_penalty
+        return self.scenario.collision.penalty * result.collision
 
     def _left_corridor(self, result: StepResult) -> np.ndarray:
         centroid = result.z[..., :3].mean(axis=1)
@@ -381,3 +385,9 @@ class FormationEpisodes:
 
 def _false(like: np.ndarray) -> np.ndarray:
     return np.zeros(like.shape[0], dtype=bool)
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """A constant shared by every step (no allocation per step); consumers cannot modify it."""
+    array.flags.writeable = False
+    return array
