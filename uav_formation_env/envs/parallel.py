@@ -1,7 +1,8 @@
 """``uav_formation_v0``: PettingZoo ParallelEnv of UAV formation under disturbances and obstacles.
 
-A thin shell over :class:`~uav_formation_env.sim.FormationSim` with one scenario copy: it holds no
-physics and no formula. Agents ``uav_0 … uav_{N-1}`` (paper: N = 5).
+A thin view of the episode layer (:class:`~uav_formation_env.episode.FormationEpisodes`) with one
+scenario copy: it holds no physics, no formula and no episode rule. Agents ``uav_0 … uav_{N-1}``
+(paper: N = 5).
 
 **Action** of each agent: a normalised acceleration command ``a ∈ [-1, 1]^3`` (Box, float32); the
 formation input is ``u_n = a · u_max`` (u_max = 5 m/s² per axis for the paper). Finite actions out
@@ -19,13 +20,32 @@ observer on, the plant applies ``u = clip(u_n + u_d, ±u_max)`` with ``u_d = -(d
 the same function the reference MPC minimises (the separation term is our addition to the paper's
 J_i, see docs/deviations.md). With ``collision.mode == "penalty"``, ``collision.penalty`` is
 subtracted in a step where the agent collides. Summed over an episode it is the paper's
-performance index along the realised trajectory.
+performance index along the realised trajectory. The reward transform of ``episode.reward``
+applies on top (the raw J_i stays in the info).
 
 **Termination and truncation**: episodes truncate at the scenario's duration (1000 steps for the
 paper). ``collision.mode``: ``"none"`` reports collisions only (default), ``"penalty"`` adds the
 penalty, ``"terminate"`` ends the episode for every agent when any UAV collides (a UAV closer than
 ``collision.uav_distance`` to another, or inside an obstacle). With rewards that are always
 negative, ``"terminate"`` makes an early crash attractive to a learner; prefer ``"penalty"``.
+
+**Training options** (scenario fields ``episode.*``, e.g. ``parallel_env("paper",
+episode__reward="log1p", episode__corridor_width=200.0)``; all off by default, the same for
+every view and trainer):
+
+| option | default | unit | effect |
+|---|---|---|---|
+| ``episode.reward`` | ``"raw"`` | - | ``"raw"`` -(J_i + p); ``"scaled"`` -(J_i + p) / J_0; ``"log1p"`` -log(1 + (J_i + p) / J_0) |
+| ``episode.reward_scale`` | 1 | - | J_0 of ``"scaled"`` and ``"log1p"`` |
+| ``episode.max_formation_error`` | 0 (off) | m | truncate when a UAV is this far from its formation slot |
+| ``episode.max_velocity_error`` | 0 (off) | m/s | truncate when a UAV is this far from its reference velocity |
+| ``episode.corridor_width`` | 0 (off) | m | terminate (mission failed) when the centroid leaves the corridor around the preset route |
+| ``episode.start`` | ``"zero"`` | - | ``"random"``: start at a step drawn in [0, T); ``"staggered"``: copy b of the first reset at step b T / B |
+| ``episode.start_controller`` | ``"heuristic"`` | - | the controller that flies a copy from t = 0 to its start step |
+
+Divergence is a truncation (neither rewarded nor punished); leaving the corridor is a
+termination. Observations are already roughly unit scale; normalisation is left to the
+trainer.
 
 **Info** of agent i (``info_mode="numeric"``, the default: every value a number or a fixed-shape
 array, so that TorchRL, BenchMARL and RLlib can stack them): ``J`` (stage cost, the raw J_i
@@ -40,7 +60,7 @@ agent names) instead.
 
 **State** (``state()``): positions / 100 m, velocities / 20 m/s, reference velocities / 20 m/s,
 estimates / 0.5 m/s², t / duration, and the adjacency matrix, flattened (float32).
-"""
+"""  # noqa: E501
 
 from __future__ import annotations
 
