@@ -36,6 +36,7 @@ import yaml
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import make_policy, run_episodes, summarise, write_json
+from uav_formation_env.policies.registry import POLICY_NAMES, SIMPLE_POLICIES
 
 REFERENCE = "lfpio"  # the policy whose realised cost the ratio column divides by
 OUTPUT_FILES = (
@@ -118,7 +119,7 @@ def evaluate_run(
 
 def compare(
     runs: Sequence[str | Path],
-    references: Sequence[str] = ("heuristic", "random"),
+    references: Sequence[str] = SIMPLE_POLICIES,
     seeds: Sequence[int] = (0, 1),
     scenario: str | Path | Scenario | None = None,
     duration: float | None = None,
@@ -386,7 +387,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=None, help="episode length [s]")
     parser.add_argument("--best", action="store_true", help="evaluate best/model.zip")
     parser.add_argument(
-        "--compare", nargs="*", default=["heuristic", "random"], help="reference policies"
+        "--compare",
+        nargs="*",
+        default=list(SIMPLE_POLICIES),
+        help=f"reference policies: any of {', '.join(POLICY_NAMES)}",
     )
     parser.add_argument(
         "--reference", default=REFERENCE, help="policy of the cost-ratio column (default lfpio)"

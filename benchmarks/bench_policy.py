@@ -6,7 +6,7 @@ minimum distance to the obstacle centres, and collisions (two UAVs closer than t
 Seeds run one after another as B = 1 episodes, or all at once as B copies with ``--batched``
 (one optimiser call per step for every copy: seconds per episode = wall time / B).
 
-    python benchmarks/bench_policy.py [--optimizers lfpio pio] [--observer on off]
+    python benchmarks/bench_policy.py [--optimizers pio lfpio] [--observer on off]
                                       [--seeds 0 1] [--batched] [--steps 1000]
                                       [--set cost.separation=0 ...] [--numpy]
 
@@ -27,6 +27,7 @@ from uav_formation_env.core.obstacles import obstacle_distances
 from uav_formation_env.episode import observations_of
 from uav_formation_env.policies import optimizers
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
+from uav_formation_env.policies.registry import DMPC_OPTIMIZERS, PAPER_OPTIMIZERS
 from uav_formation_env.sim import FormationSim, StepResult
 
 
@@ -76,7 +77,9 @@ def episode(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--optimizers", nargs="+", default=["lfpio", "pio"])
+    parser.add_argument(
+        "--optimizers", nargs="+", default=list(PAPER_OPTIMIZERS), choices=DMPC_OPTIMIZERS
+    )
     parser.add_argument("--observer", nargs="+", default=["on", "off"], choices=["on", "off"])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     parser.add_argument("--steps", type=int, default=1000)

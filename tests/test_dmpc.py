@@ -7,6 +7,7 @@ Also the per-receiver generalisation of the cost (``core/cost.py``) the policy r
 from __future__ import annotations
 
 import copy
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -132,6 +133,38 @@ def test_triggered_runs_the_optimiser_and_never_gets_worse(scenario, optimizer) 
     np.testing.assert_array_equal(rec.evaluations, n_evaluations(policy.optimizer))
     assert (rec.j_exec <= rec.j_pre).all()
     assert (rec.j_exec < rec.j_pre).mean() > 0.9  # the optimiser really improves on W
+
+
+def test_triggered_keeps_w_where_the_optimiser_answers_worse(scenario, monkeypatch) -> None:
+    """The never-worse-than-W guard is the policy's own, not the optimiser's: an optimiser that
+    answers the box corner (far worse than W, and claims cost 0) for UAVs 1, 3, 5 (rows 0, 2, 4)
+    leaves them their warm starts with J_exec = J_pre; UAVs 2 and 4 take its better answers."""
+    from uav_formation_env.policies import dmpc_step
+
+    real = dmpc_step.minimise
+    bad = np.array([0, 2, 4])
+
+    def worse(cost_fn, x0, low, high, rng, config, **kwargs):
+        result = real(cost_fn, x0, low, high, rng, config, **kwargs)
+        x = result.x.copy()
+        x[bad] = np.broadcast_to(high, x.shape)[bad]
+        return replace(result, x=x, cost=np.zeros_like(result.cost))
+
+    sim = FormationSim(scenario)
+    policy = NashDMPCPolicy(scenario, seed=0, threshold=ALWAYS)
+    closed_loop(policy, sim, 3)
+    monkeypatch.setattr(dmpc_step, "minimise", worse)
+    w = policy.warm_starts()
+    policy.act_batch(observe(sim))
+    rec = policy.records()
+    assert rec.triggered[-1].all()
+    np.testing.assert_array_equal(policy.plans[0, bad], w[0, bad])
+    np.testing.assert_array_equal(rec.j_exec[-1, 0, bad], rec.j_pre[-1, 0, bad])
+    good = np.array([1, 3])
+    assert (rec.j_exec[-1, 0, good] < rec.j_pre[-1, 0, good]).all()
+    assert not np.array_equal(policy.plans[0, good], w[0, good])
+    assert (rec.j_exec <= rec.j_pre).all()
+    np.testing.assert_array_equal(rec.evaluations[-1], n_evaluations(policy.optimizer))
 
 
 def test_records_shapes_and_trigger_counts(scenario) -> None:
@@ -273,6 +306,41 @@ def test_only_neighbours_plans_matter(scenario) -> None:
     assert j_non == j_ref
     assert j_nbr != j_ref
     assert not np.array_equal(a_nbr, a_ref)
+
+
+def test_only_neighbours_plans_matter_within_the_separation_distance(scenario) -> None:
+    """UAV 3 (index 2), not a neighbour of UAV 1 (index 0), put within d_s of it: its position
+    now enters UAV 1's J_i (the separation term over every sensed UAV), but its broadcast plan
+    still does not: UAV 1 predicts it with zero inputs, so perturbing the plan changes neither
+    UAV 1's J_pre nor its action (with the plan used, the predicted distances, and so J_pre,
+    would change)."""
+    sim = FormationSim(scenario)
+    base = NashDMPCPolicy(scenario, seed=0, threshold=ALWAYS)
+    closed_loop(base, sim, 8)
+    d_s = scenario.cost.separation_distance
+    z = sim.last.z.copy()
+    z[0, 2, :3] = z[0, 0, :3] + np.array([0.0, 0.5 * d_s, 0.0])
+    close, apart = observe(sim, z), observe(sim)
+    assert close[0, 0, 19 + 7 * 1] == 0.0  # UAV 3 is not a neighbour of UAV 1
+    assert sim.last.min_separation.min() > d_s  # in formation no pair is within d_s
+    rng = np.random.default_rng(7)
+
+    def act_with(obs: np.ndarray, perturb: bool) -> tuple[np.ndarray, float]:
+        policy = copy.deepcopy(base)
+        if perturb:
+            plans = policy.plans
+            plans[0, 2] += rng.uniform(-2, 2, (5, 3))
+            policy.plans = plans
+        actions = policy.act_batch(obs)
+        return actions[0, 0], policy.records().j_pre[-1, 0, 0]
+
+    a_ref, j_ref = act_with(close, perturb=False)
+    a_plan, j_plan = act_with(close, perturb=True)
+    a_far, j_far = act_with(apart, perturb=False)
+    np.testing.assert_array_equal(a_plan, a_ref)
+    assert j_plan == j_ref
+    assert j_ref > j_far  # the separation term of the pair we placed
+    assert not np.array_equal(a_ref, a_far)
 
 
 def test_policy_module_imports_neither_sim_nor_env() -> None:

@@ -309,14 +309,39 @@ def test_docstring_observation_size_for_paper():
 
 # ------------------------------------------------------------------------ rewards and collisions
 def test_reward_is_minus_j_without_collision_mode():
+    """reward = -J_i, and J_i is the stage cost of the state AFTER the step with the APPLIED
+    formation input ``u_n = a · u_max``, recomputed here from ``core.cost.stage_cost`` (a reward
+    from the state before the step, or from ``a`` unscaled, fails the second check)."""
+    from uav_formation_env.core.cost import stage_cost
+
     e = parallel_env()
     e.reset(seed=3)
     rng = np.random.default_rng(3)
+    sc, agents = e.scenario, e.possible_agents
+    offsets = np.asarray(sc.formation.offsets, dtype=float)
     for _ in range(50):
-        _, rewards, _, _, infos = e.step(random_actions(e.agents, rng))
-        for agent in e.possible_agents:
+        actions = random_actions(e.agents, rng)
+        _, rewards, _, _, infos = e.step(actions)
+        for agent in agents:
             assert rewards[agent] == -infos[agent]["J"]
             assert infos[agent]["penalty"] == 0.0
+
+        def stacked(key: str, infos=infos) -> np.ndarray:
+            return np.stack([np.asarray(infos[a][key], dtype=float) for a in agents])[None]
+
+        z = np.concatenate((stacked("position"), stacked("velocity")), axis=-1)
+        u_n = np.stack([np.asarray(actions[a], dtype=float) for a in agents])[None]
+        u_n = u_n * sc.dynamics.u_max  # the actions are inside [-1, 1]: nothing is clipped
+        expected = stage_cost(
+            z,
+            u_n,
+            stacked("reference_velocity"),
+            stacked("neighbours"),
+            offsets,
+            sc.cost,
+            sc.formation.mirrored_offsets,
+        ).total[0]
+        np.testing.assert_allclose([rewards[a] for a in agents], -expected, rtol=1e-12)
 
 
 def drive_together(e, rng: np.random.Generator, max_steps: int = 200):

@@ -148,6 +148,37 @@ def test_run_episodes_rejects_bad_actions_and_policy_names():
         run_episodes(scenario, RandomPolicy(0), [])
 
 
+def test_one_registry_of_policy_names():
+    """Every list of policy names is the registry's: make_policy builds each name, the
+    evaluation package re-exports the policies' objects, and the reproduction's variants and
+    labels are built from the names."""
+    import uav_formation_env.evaluation as evaluation
+    import uav_formation_env.policies as policies
+    from uav_formation_env.policies import registry
+    from uav_formation_env.policies.dmpc import POLICY_OPTIMIZERS, NashDMPCPolicy
+    from uav_formation_env.reproduce.variants import GAME_VARIANTS, LABELS, VARIANTS
+
+    assert (*registry.DMPC_OPTIMIZERS, *registry.SIMPLE_POLICIES) == registry.POLICY_NAMES
+    assert POLICY_OPTIMIZERS is registry.DMPC_OPTIMIZERS
+    assert set(registry.POLICY_LABELS) == set(registry.POLICY_NAMES)
+    assert all(name in registry.POLICY_HELP for name in registry.POLICY_NAMES)
+    assert set(registry.PAPER_OPTIMIZERS) <= set(registry.DMPC_OPTIMIZERS)
+    scenario = short(2.0)
+    for name in registry.DMPC_OPTIMIZERS:
+        policy = make_policy(name.upper(), scenario)
+        assert isinstance(policy, NashDMPCPolicy)
+        assert isinstance(policy.optimizer, registry.DMPC_SOLVERS[name])
+    assert isinstance(make_policy("heuristic", scenario), HeuristicPolicy)
+    assert isinstance(make_policy("random", scenario), RandomPolicy)
+    for name in ("make_policy", "HeuristicPolicy", "RandomPolicy", "SB3Policy", "POLICY_NAMES"):
+        assert getattr(evaluation, name) is getattr(policies, name)
+    with pytest.raises(ValueError, match="unknown optimizer"):
+        NashDMPCPolicy(scenario, optimizer="heuristic")
+    used = {name for name, _ in {**VARIANTS, **GAME_VARIANTS}.values()}
+    assert used == set(registry.DMPC_OPTIMIZERS)
+    assert LABELS["nash_nftsmo"] == registry.POLICY_LABELS["nash"] + " + NFTSMO"
+
+
 def test_sb3_model_with_vecnormalize(tmp_path):
     pytest.importorskip("stable_baselines3")
     from stable_baselines3 import PPO

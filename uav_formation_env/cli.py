@@ -308,13 +308,10 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-POLICY_HELP = (
-    "lfpio, pio, pso, exact, nash (the reference DMPC with that solver), heuristic, random, or a "
-    "stable-baselines3 model path (.zip; a vecnormalize.pkl beside it is applied)"
-)
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from uav_formation_env.policies.registry import POLICY_HELP
     from uav_formation_env.reproduce.nash_analysis import NASH_FIGURE
     from uav_formation_env.reproduce.variants import FIGURES
 

@@ -11,9 +11,10 @@ its agents). A policy is anything with
 - optionally ``records()`` returning per-step arrays ``triggered``, ``j_pre`` and ``j_exec`` of
   shape (T, B, N) (as :meth:`~uav_formation_env.policies.dmpc.NashDMPCPolicy.records` does).
 
-Adapters here: :class:`RandomPolicy`, :class:`HeuristicPolicy` (the consensus PD controller acting
-from decoded observations) and :class:`SB3Policy` (a saved stable-baselines3 model, loaded lazily).
-:func:`make_policy` builds any of them, or the reference DMPC, from a name.
+Re-exported from :mod:`uav_formation_env.policies`: :class:`RandomPolicy`, :class:`HeuristicPolicy`
+(the consensus PD controller acting from decoded observations), :class:`SB3Policy` (a saved
+stable-baselines3 model, loaded lazily), and :func:`make_policy`, which builds any of them, or the
+reference DMPC, from a name of :data:`POLICY_NAMES` (:mod:`uav_formation_env.policies.registry`).
 
 Metrics (:func:`summarise`), each per seed and then mean over seeds unless stated:
 
@@ -67,22 +68,20 @@ from uav_formation_env.evaluation.output import (
     write_json,
     write_records,
 )
-from uav_formation_env.evaluation.policies import (
-    DMPC_OPTIMIZERS,
-    POLICY_NAMES,
-    SB3_ALGORITHMS,
-    BatchPolicy,
-    HeuristicPolicy,
-    RandomPolicy,
-    SB3Policy,
-    make_policy,
-)
 from uav_formation_env.evaluation.runner import (
     EpisodeBatch,
     ProgressLike,
     policy_plans,
     run_episodes,
 )
+from uav_formation_env.policies.learned import SB3_ALGORITHMS, SB3Policy
+from uav_formation_env.policies.registry import (
+    DMPC_OPTIMIZERS,
+    POLICY_NAMES,
+    BatchPolicy,
+    make_policy,
+)
+from uav_formation_env.policies.simple import HeuristicPolicy, RandomPolicy
 
 __all__ = [
     "DMPC_OPTIMIZERS",

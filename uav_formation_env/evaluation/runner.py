@@ -14,8 +14,8 @@ from uav_formation_env.config_io import with_overrides
 from uav_formation_env.core.observation import decode_observations
 from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.episode import FormationEpisodes
-from uav_formation_env.evaluation.policies import BatchPolicy
 from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
+from uav_formation_env.policies.registry import BatchPolicy
 from uav_formation_env.seeding import check_seed
 
 

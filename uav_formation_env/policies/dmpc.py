@@ -34,8 +34,7 @@ Algorithm per control step, for every UAV i simultaneously (a Jacobi best-respon
    :func:`~uav_formation_env.core.cost.stage_cost`).
 4. Event trigger: if ``J_pre > threshold`` (10), minimise J_i with PIO / LFPIO / PSO from W_i as the
    initial global best over the box ``|u_n,c| <= u_max - |u_d,c|`` per axis (docs/model.md §1.5,
-   with
-   ``u_d = -estimate``); the output is the better of W_i and the best sequence found, so it is
+   with ``u_d = -estimate``); the output is the better of W_i and the best sequence found, so it is
    never worse than W_i. Otherwise the output is W_i (not triggered, no evaluations). All
    triggered problems of all copies are gathered into one flat batch and solved by one
    :func:`~uav_formation_env.policies.optimizers.minimise` call per step. Apart from the
@@ -59,6 +58,10 @@ With ``inner_rounds = K > 1`` steps 2-4 repeat K times per step against the neig
 of the previous round (not shifted: same time), each round with the same event trigger. K = 1 is
 the paper's scheme.
 
+Steps 1-4 are a solver of :mod:`uav_formation_env.policies.dmpc_step`: ``TriggeredRounds`` with a
+``MetaheuristicSolver`` or an ``ExactSolver`` per round, or ``NashIteration``; each step appends a
+``StepRecord``, stacked by :meth:`NashDMPCPolicy.records`.
+
 Randomness: one ``numpy.random.Generator`` per scenario copy. ``reset(batch_size, seeds)`` seeds
 copy b's stream from its episode's seed (and the policy's ``seed``, if given), so an episode
 named by its seed flies the same, bit for bit, alone or inside any batch (the runner and
@@ -71,7 +74,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -79,27 +81,10 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario
-from uav_formation_env.core.observation import (
-    DecodedObservation,
-    decode_observations,
-    observation_dim,
-)
-from uav_formation_env.policies.best_response import ExactConfig, best_response
-from uav_formation_env.policies.broadcast import (
-    HorizonProblems,
-    horizon_problems,
-    observed_time,
-    shift_warm_start,
-)
-from uav_formation_env.policies.nash import NashConfig, iterated_best_response
-from uav_formation_env.policies.optimizers import (
-    OPTIMIZERS,
-    LFPIOConfig,
-    PIOConfig,
-    PSOConfig,
-    RowStreams,
-    minimise,
-)
+from uav_formation_env.core.observation import decode_observations, observation_dim
+from uav_formation_env.policies.broadcast import shift_warm_start
+from uav_formation_env.policies.dmpc_step import DMPCRecords, StepRecord, step_solver
+from uav_formation_env.policies.registry import DMPC_OPTIMIZERS, SolverConfig, solver_config
 from uav_formation_env.seeding import check_seed, copy_streams
 
 __all__ = [
@@ -107,63 +92,13 @@ __all__ = [
     "DMPCRecords",
     "NashDMPCPolicy",
     "POLICY_OPTIMIZERS",
+    "StepRecord",
     "shift_warm_start",
 ]
 
 DEFAULT_THRESHOLD = 10.0  # event-trigger threshold on J_i(W) (docs/model.md §5) [-]
 
-OptimizerConfig = PIOConfig | LFPIOConfig | PSOConfig | ExactConfig | NashConfig
-OptimizerLike = str | OptimizerConfig
-_CONFIGS: dict[str, type[OptimizerConfig]] = {
-    **OPTIMIZERS,
-    "exact": ExactConfig,
-    "nash": NashConfig,
-}
-POLICY_OPTIMIZERS = tuple(_CONFIGS)  # the optimiser names NashDMPCPolicy accepts
-
-
-def _optimizer_config(optimizer: OptimizerLike) -> OptimizerConfig:
-    if isinstance(optimizer, OptimizerConfig):
-        return optimizer
-    if isinstance(optimizer, str) and optimizer.lower() in _CONFIGS:
-        return _CONFIGS[optimizer.lower()]()
-    raise ValueError(
-        f"unknown optimizer {optimizer!r}: expected one of {sorted(_CONFIGS)} or a config object"
-    )
-
-
-@dataclass(frozen=True)
-class DMPCRecords:
-    """Per-step records of T steps, B copies and N UAVs.
-
-    Attributes:
-        time: (T, B) time t of the step [s].
-        triggered: (T, B, N) bool, ``J_pre > threshold`` (in any inner round).
-        j_pre: (T, B, N) J_i of the warm start W_i against the neighbours' warm starts [-].
-        j_exec: (T, B, N) J_i of the output sequence (against the last round's plans) [-].
-        evaluations: (T, B, N) the optimiser's cost evaluations (its budget: 1830 for LFPIO,
-            810 for PIO; 0 when not triggered). With ``population_cost="quadratic"`` these are
-            quadratic-form evaluations; identifying the form costs 1 + 2n + n(n-1)/2 = 136 (H = 5)
-            direct evaluations of J_i per triggered UAV, not counted here. For ``"exact"`` and
-            ``"nash"`` they are exactly those identification evaluations (136 per best response;
-            plus the refinement's candidates where the separation term is active), summed over
-            the best responses the UAV computed (``"nash"``: one per sweep, plus the final gap
-            check); the solve itself evaluates nothing.
-        wall_time: (T,) wall-clock time of the whole step, all copies and UAVs [s].
-        nash_iterations: (T, B) sweeps of iterated best response (``"nash"``; 0 for the other
-            optimisers and for copies where no UAV was triggered).
-        nash_converged: (T, B) bool, the ``"nash"`` profile met its gap tolerance (True for the
-            other optimisers).
-    """
-
-    time: np.ndarray
-    triggered: np.ndarray
-    j_pre: np.ndarray
-    j_exec: np.ndarray
-    evaluations: np.ndarray
-    wall_time: np.ndarray
-    nash_iterations: np.ndarray | None = None
-    nash_converged: np.ndarray | None = None
+POLICY_OPTIMIZERS = DMPC_OPTIMIZERS  # the solver names NashDMPCPolicy accepts (the registry's)
 
 
 class NashDMPCPolicy:
@@ -186,8 +121,7 @@ class NashDMPCPolicy:
             (None: fresh entropy).
         threshold: event-trigger threshold on J_i(W) [-].
         inner_rounds: K exchange / re-optimise rounds per step (docs/model.md §5; 1 = the paper;
-        must be 1
-            for ``"nash"``, which iterates to equilibrium itself).
+            must be 1 for ``"nash"``, which iterates to equilibrium itself).
         population_cost: how the optimiser's populations are evaluated: ``"quadratic"`` (J_i's
             exact quadratic coefficients, identified once per step from the one definition, plus
             the separation term of the pairs that can be active in the search box, see
@@ -200,7 +134,7 @@ class NashDMPCPolicy:
     def __init__(
         self,
         scenario: Scenario | str | Path | Mapping[str, Any] = "paper",
-        optimizer: OptimizerLike = "lfpio",
+        optimizer: str | SolverConfig = "lfpio",
         seed: int | None = None,
         threshold: float = DEFAULT_THRESHOLD,
         inner_rounds: int = 1,
@@ -215,9 +149,8 @@ class NashDMPCPolicy:
         if not np.isfinite(threshold):
             raise ValueError(f"threshold must be finite, got {threshold!r}")
         self.scenario = resolve_scenario(scenario)
-        self.optimizer = _optimizer_config(optimizer)
-        if isinstance(self.optimizer, NashConfig) and inner_rounds != 1:
-            raise ValueError("inner_rounds must be 1 with the 'nash' optimizer")
+        self.optimizer = solver_config(optimizer)
+        self._solver = step_solver(self.optimizer, self.scenario, inner_rounds, population_cost)
         self.threshold = float(threshold)
         self.inner_rounds = int(inner_rounds)
         self.population_cost = population_cost
@@ -232,7 +165,7 @@ class NashDMPCPolicy:
         self.obs_dim = observation_dim(self.n_uav)
         self.agents = [f"uav_{i}" for i in range(self.n_uav)]
         self._plans: np.ndarray | None = None  # (B, N, H, 3) last broadcast plans [m/s^2]
-        self._records: list[tuple[np.ndarray, ...]] = []
+        self._records: list[StepRecord] = []
         self._wall: list[float] = []
 
     # ------------------------------------------------------------------ state
@@ -321,17 +254,9 @@ class NashDMPCPolicy:
         decoded = decode_observations(obs, self.n_uav)
         self._restart(decoded.time_fraction[:, 0] == 0.0)
         assert self._plans is not None
-        batch = obs.shape[0]
-        sweeps, converged = np.zeros(batch, dtype=np.int64), np.ones(batch, dtype=bool)
-        if isinstance(self.optimizer, NashConfig):
-            output, triggered, j_pre, j_exec, evals, sweeps, converged = self._solve_nash(
-                decoded, self._plans, self.optimizer
-            )
-        else:
-            output, triggered, j_pre, j_exec, evals = self._solve(decoded, self._plans)
+        output, record = self._solver.step(decoded, self._plans, self.threshold, self._rngs)
         self._plans = output
-        t = observed_time(decoded.time_fraction[:, 0], self.scenario.duration, self.dt)
-        self._records.append((t, triggered, j_pre, j_exec, evals, sweeps, converged))
+        self._records.append(record)
         self._wall.append(time.perf_counter() - start)
         return np.clip(output[..., 0, :] / self.u_max, -1.0, 1.0)
 
@@ -387,21 +312,7 @@ class NashDMPCPolicy:
     def records(self) -> DMPCRecords:
         """The per-step records since the last (automatic) reset, as arrays."""
         batch = 1 if self._plans is None else self._plans.shape[0]
-        n = self.n_uav
-        if not self._records:
-            empty = np.zeros((0, batch, n))
-            return DMPCRecords(
-                time=np.zeros((0, batch)),
-                triggered=empty.astype(bool),
-                j_pre=empty,
-                j_exec=empty.copy(),
-                evaluations=empty.astype(np.int64),
-                wall_time=np.zeros(0),
-                nash_iterations=np.zeros((0, batch), dtype=np.int64),
-                nash_converged=np.zeros((0, batch), dtype=bool),
-            )
-        t, trig, pre, exe, evals, sweeps, conv = (np.stack(x) for x in zip(*self._records))
-        return DMPCRecords(t, trig, pre, exe, evals, np.asarray(self._wall), sweeps, conv)
+        return DMPCRecords.from_steps(self._records, self._wall, batch, self.n_uav)
 
     def trigger_counts(self) -> np.ndarray:
         """(B, N) number of triggered steps per copy and UAV since the last reset."""
@@ -420,103 +331,3 @@ class NashDMPCPolicy:
         elif restart.any():
             self._plans[restart] = 0.0
         self._fresh = False
-
-    def _solve(
-        self, decoded: DecodedObservation, plans: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Warm start, trigger and batched optimisation of every UAV (K rounds).
-
-        Returns:
-            ``(output (B, N, H, 3), triggered, j_pre, j_exec, evaluations)``, the last four
-            (B, N).
-        """
-        h = self.horizon
-        current = shift_warm_start(plans)  # W_i, and W_j as the receivers compute it
-        shape = current.shape[:2]
-        triggered = np.zeros(shape, dtype=bool)
-        evals = np.zeros(shape, dtype=np.int64)
-        j_pre = j_cur = np.zeros(shape)
-        for round_ in range(self.inner_rounds):
-            problems = horizon_problems(decoded, current, self.scenario)
-            j_cur = problems.cost.terms(current[:, :, None]).total[..., 0]
-            if round_ == 0:
-                j_pre = j_cur
-            trig = j_cur > self.threshold
-            triggered |= trig
-            index = np.flatnonzero(trig)
-            if index.size == 0:
-                continue
-            sub = problems.cost.take(index)  # the M triggered problems as one copy
-            half = problems.half_width.reshape(-1, 3)[index][:, None, :]  # (M, 1, 3)
-            x0 = current.reshape(-1, h, 3)[index]
-            if isinstance(self.optimizer, ExactConfig):
-                # The exact minimiser over the box; no random draws, so the generator's stream
-                # is untouched.
-                exact = best_response(HorizonProblems(sub, half[None, :, 0]), x0=x0[None])
-                result_x, n_evals = exact.x[0], exact.evaluations[0]
-            else:
-                if self.population_cost == "quadratic":
-                    population_cost = sub.quadratic(half_width=half[None, :, 0]).total
-                else:
-                    population_cost = sub.terms_total
-                streams = RowStreams(self._rngs, trig.sum(axis=1))  # index is ordered by copy
-                result = minimise(
-                    lambda x, f=population_cost: f(x[None])[0],
-                    x0,
-                    -half,
-                    half,
-                    streams,
-                    self.optimizer,
-                )
-                result_x, n_evals = result.x, result.n_evals
-            # Exact J_i of the optimiser's best; keep W where it is not strictly better.
-            found = sub.terms(result_x[None, :, None]).total[0, :, 0]
-            better = found < j_cur.reshape(-1)[index]
-            flat = current.reshape(-1, h, 3).copy()
-            flat[index[better]] = result_x[better]
-            current = flat.reshape(current.shape)
-            j_cur = j_cur.copy()
-            j_cur.reshape(-1)[index[better]] = found[better]
-            evals.reshape(-1)[index] += n_evals
-        return current, triggered, j_pre, j_cur, evals
-
-    def _solve_nash(
-        self, decoded: DecodedObservation, plans: np.ndarray, config: NashConfig
-    ) -> tuple[np.ndarray, ...]:
-        """Warm start, trigger, and an equilibrium among the triggered UAVs of every copy.
-
-        The triggered UAVs iterate exact best responses from the warm starts (the untriggered
-        keep W_i and are not players) until every player's Nash gap is within the tolerance.
-
-        Returns:
-            ``(output (B, N, H, 3), triggered, j_pre, j_exec, evaluations, sweeps (B,),
-            converged (B,))``; ``j_exec`` is J_i of the output against the output profile.
-        """
-        warm = shift_warm_start(plans)
-        problems = horizon_problems(decoded, warm, self.scenario)
-        j_pre = problems.cost.terms(warm[:, :, None]).total[..., 0]
-        triggered = j_pre > self.threshold
-        batch = warm.shape[0]
-        if not triggered.any():
-            zeros = np.zeros(batch, dtype=np.int64)
-            evals = np.zeros(triggered.shape, dtype=np.int64)
-            return warm, triggered, j_pre, j_pre, evals, zeros, np.ones(batch, dtype=bool)
-        solution = iterated_best_response(
-            decoded,
-            self.scenario,
-            warm,
-            method=config.method,
-            max_iter=config.max_iter,
-            tol=config.tol,
-            playing=triggered,
-        )
-        # A copy with no player stopped at sweep 0 with its warm starts and their costs.
-        return (
-            solution.plans,
-            triggered,
-            j_pre,
-            solution.gap.cost,
-            solution.evaluations,
-            solution.iterations,
-            solution.converged,
-        )

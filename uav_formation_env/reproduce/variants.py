@@ -8,34 +8,31 @@ from typing import Any
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import with_overrides
-from uav_formation_env.evaluation import (
-    EpisodeBatch,
+from uav_formation_env.evaluation import EpisodeBatch, run_episodes
+from uav_formation_env.policies.registry import (
+    DMPC_OPTIMIZERS,
+    PAPER_OPTIMIZERS,
+    POLICY_LABELS,
     make_policy,
-    run_episodes,
 )
 
-# name -> (optimiser, observer on)
+OBSERVER_SUFFIX = "_nftsmo"  # a variant flown with the NFTSMO observer on
+# name -> (optimiser, observer on): the paper's optimisers without and with the observer
 VARIANTS: dict[str, tuple[str, bool]] = {
-    "pio": ("pio", False),
-    "lfpio": ("lfpio", False),
-    "pio_nftsmo": ("pio", True),
-    "lfpio_nftsmo": ("lfpio", True),
+    f"{name}{OBSERVER_SUFFIX if observer else ''}": (name, observer)
+    for observer in (False, True)
+    for name in PAPER_OPTIMIZERS
 }
-# More solvers of the same game for the Nash-gap comparison (observer on). Besides these names a
-# game variant can be the path of a stable-baselines3 model (its action held over the horizon).
+# The other solvers of the same game for the Nash-gap comparison (observer on). Besides these names
+# a game variant can be the path of a stable-baselines3 model (its action held over the horizon).
 GAME_VARIANTS: dict[str, tuple[str, bool]] = {
-    "pso_nftsmo": ("pso", True),
-    "exact_nftsmo": ("exact", True),
-    "nash_nftsmo": ("nash", True),
+    f"{name}{OBSERVER_SUFFIX}": (name, True)
+    for name in DMPC_OPTIMIZERS
+    if name not in PAPER_OPTIMIZERS
 }
 LABELS = {
-    "pio": "PIO",
-    "lfpio": "LFPIO",
-    "pio_nftsmo": "PIO + NFTSMO",
-    "lfpio_nftsmo": "LFPIO + NFTSMO",
-    "pso_nftsmo": "PSO + NFTSMO",
-    "exact_nftsmo": "exact best response + NFTSMO",
-    "nash_nftsmo": "iterated best response (Nash) + NFTSMO",
+    variant: POLICY_LABELS[name] + (" + NFTSMO" if observer else "")
+    for variant, (name, observer) in {**VARIANTS, **GAME_VARIANTS}.items()
 }
 # Table 2 of the paper (one run, 1000 steps)
 PAPER_TRIGGERS: dict[str, tuple[float, ...]] = {

@@ -53,7 +53,6 @@ __all__ = [
 ]
 
 
-from uav_formation_env.policies.levy import levy_steps, mantegna_components, mantegna_sigma
 from uav_formation_env.policies.optimizers.config import (
     FITNESS_EPS,
     OPTIMIZERS,
@@ -65,6 +64,11 @@ from uav_formation_env.policies.optimizers.config import (
     n_evaluations,
 )
 from uav_formation_env.policies.optimizers.dispatch import minimise
+from uav_formation_env.policies.optimizers.levy import (
+    levy_steps,
+    mantegna_components,
+    mantegna_sigma,
+)
 from uav_formation_env.policies.optimizers.lfpio_kernels import COMPILED_AVAILABLE
 from uav_formation_env.policies.optimizers.population import fitness, weighted_centre
 from uav_formation_env.policies.optimizers.streams import RowStreams

@@ -11,12 +11,12 @@ import os
 
 import numpy as np
 
-from uav_formation_env.policies.levy import (
+from uav_formation_env.policies.optimizers.config import FITNESS_EPS, LFPIOConfig
+from uav_formation_env.policies.optimizers.levy import (
     TINY,
     levy_denominator_into,
     mantegna_sigma,
 )
-from uav_formation_env.policies.optimizers.config import FITNESS_EPS, LFPIOConfig
 from uav_formation_env.policies.optimizers.population import Population, weighted_centre_into
 
 try:  # pragma: no cover - exercised when the [fast] extra is installed

@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 
-from uav_formation_env.policies.levy import (
+from uav_formation_env.policies.optimizers.config import LFPIOConfig, PIOConfig, PSOConfig
+from uav_formation_env.policies.optimizers.levy import (
     levy_steps_into,
 )
-from uav_formation_env.policies.optimizers.config import LFPIOConfig, PIOConfig, PSOConfig
 from uav_formation_env.policies.optimizers.population import Population, weighted_centre_into
 
 
