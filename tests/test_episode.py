@@ -250,3 +250,16 @@ def test_random_start_on_autoreset_and_truncation_at_the_duration() -> None:
     assert step.truncated.tolist() == ended.tolist()  # the duration still ends the episode
     new_start = episodes.sim.steps[ended]
     assert (new_start < PAPER.n_steps).all()  # the next episode started somewhere else again
+
+
+def test_leaving_the_corridor_costs_the_corridor_penalty() -> None:
+    episodes = FormationEpisodes(scenario(corridor_width=50.0, corridor_penalty=1e6), 1)
+    episodes.reset(seed=0)
+    for _ in range(200):
+        step = episodes.step(sideways())
+        if step.done[0]:
+            break
+        assert (step.penalty == 0).all()
+    assert step.left_corridor[0]
+    np.testing.assert_array_equal(step.penalty, np.full((1, 5), 1e6))
+    np.testing.assert_allclose(step.reward, -(step.cost + 1e6))

@@ -453,7 +453,10 @@ class EpisodeConfig:
       the formation (anchored at the swarm's mean) or more than ``max_velocity_error`` from its
       reference velocity is *truncated* (neither rewarded nor punished for diverging); 0 = off.
     - Mission corridor: a copy whose formation centroid is more than ``corridor_width`` from the
-      preset route (horizontally) is *terminated*, as a failed mission; 0 = off.
+      preset route (horizontally) is *terminated*, as a failed mission; 0 = off. Since every
+      reward is negative, ending early also stops the costs: ``corridor_penalty`` is added to
+      each agent's cost in the step that leaves the corridor, so that leaving costs more than
+      the episode's remaining costs would (e.g. remaining steps x a typical stage cost).
     - Start along the mission: ``start="zero"`` starts every episode at t = 0; ``"random"``
       starts each episode at a step drawn uniformly in [0, T) from the copy's generator,
       ``"staggered"`` spreads the copies of the first reset evenly over [0, T) (copy b at step
@@ -467,6 +470,7 @@ class EpisodeConfig:
     max_formation_error: float = 0.0  # divergence bound on a UAV's formation error [m]; 0 = off
     max_velocity_error: float = 0.0  # divergence bound on |v_i - v^d_i| [m/s]; 0 = off
     corridor_width: float = 0.0  # half-width of the corridor around the preset route [m]; 0 = off
+    corridor_penalty: float = 0.0  # cost added to each agent on leaving the corridor [-]
     start: str = "zero"  # "zero", "random" or "staggered": where along the mission episodes start
     start_controller: str = "heuristic"  # flies a copy to its start step
 
@@ -480,6 +484,7 @@ class EpisodeConfig:
         _non_negative(self.max_formation_error, "episode.max_formation_error")
         _non_negative(self.max_velocity_error, "episode.max_velocity_error")
         _non_negative(self.corridor_width, "episode.corridor_width")
+        _non_negative(self.corridor_penalty, "episode.corridor_penalty")
         _require(
             self.start in START_MODES,
             "episode.start",

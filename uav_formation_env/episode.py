@@ -26,6 +26,7 @@ Table of the episode options (``scenario.episode``; units; all off by default):
 | ``max_formation_error`` | 0 (off) | m | truncate a copy with a UAV this far from its slot |
 | ``max_velocity_error`` | 0 (off) | m/s | truncate a copy with a UAV this far from its reference velocity |
 | ``corridor_width`` | 0 (off) | m | terminate a copy whose centroid leaves the corridor around the preset route |
+| ``corridor_penalty`` | 0 | - | cost added to each agent in the step that leaves the corridor |
 | ``start`` | ``"zero"`` | - | ``"random"``: each episode starts at a step drawn in [0, T); ``"staggered"``: the first reset spreads copy b to step b T / B |
 | ``start_controller`` | ``"heuristic"`` | - | the controller that flies a copy from t = 0 to its start step |
 
@@ -156,7 +157,7 @@ class EpisodeStep:
     observation: np.ndarray  # (B, N, dim) float32
     reward: np.ndarray  # (B, N) after the reward transform
     cost: np.ndarray  # (B, N) stage cost J_i of the transition (raw, untransformed)
-    penalty: np.ndarray  # (B, N) collision penalty ("penalty" mode)
+    penalty: np.ndarray  # (B, N) collision penalty ("penalty" mode) + corridor penalty
     terminated: np.ndarray  # (B,) bool: collision in "terminate" mode or left the corridor
     truncated: np.ndarray  # (B,) bool: duration reached or diverged (and not terminated)
     collided: np.ndarray  # (B,) bool: some UAV collided in this step
@@ -253,6 +254,19 @@ class FormationEpisodes:
         """
         if self.last is None:
             raise RuntimeError("call reset() before step()")
+        return self._step(self._checked(actions))
+
+    def step_validated(self, actions: np.ndarray) -> EpisodeStep:
+        """:meth:`step` for actions already through :func:`validate_actions` ((B, N, 3) finite
+        floats in [-1, 1]): the single-copy views validate per agent to name the culprit, and
+        checking twice cost 4% of a B = 1 step (measured with callgrind)."""
+        if self.last is None:
+            raise RuntimeError("call reset() before step()")
+        return self._step(actions)
+
+    def _checked(self, actions: np.ndarray) -> np.ndarray:
+        """(B, N, 3) actions as finite floats clipped to [-1, 1], or a ValueError naming the
+        copy and agent."""
         actions = np.asarray(actions)
         if actions.dtype.kind not in "biuf":
             raise ValueError(f"actions must be real numbers, got dtype {actions.dtype}")
@@ -264,16 +278,23 @@ class FormationEpisodes:
             raise ValueError(
                 f"actions contain NaN or infinite values (first: copy {copy}, uav_{agent})"
             )
-        # np.clip for finite values, without its Python wrappers (the sim checks finiteness)
-        clipped = np.minimum(np.maximum(actions.astype(float), -1.0), 1.0)
+        # np.clip for finite values, without its Python wrappers
+        return np.minimum(np.maximum(actions.astype(float), -1.0), 1.0)
+
+    def _step(self, clipped: np.ndarray) -> EpisodeStep:
         result = self.sim.step(clipped * self.u_max)
         cost = result.cost.total
         penalty = self.penalties(result)
         collided = result.collision.any(axis=1)
         left = self._left_corridor(result) if self._corridor else self._no_copy
+        if self._corridor and left.any() and self.scenario.episode.corridor_penalty > 0:
+            penalty = penalty + self.scenario.episode.corridor_penalty * left[:, None]
         terminated = left | collided if self._end_on_collision else left
         diverged = self._diverged(result) & ~terminated if self._divergence else self._no_copy
-        truncated = (result.truncated | diverged) & ~terminated
+        if self._corridor or self._end_on_collision or self._divergence:
+            truncated = (result.truncated | diverged) & ~terminated
+        else:  # only the duration ends episodes
+            truncated = result.truncated
         step = EpisodeStep(
             observation=observations_of(self.sim, result),
             reward=self.reward(cost, penalty),
@@ -341,7 +362,7 @@ class FormationEpisodes:
         """(B, N) reward of a stage cost and penalty through ``episode.reward``."""
         episode = self.scenario.episode
         if episode.reward == "raw":
-            return -(cost + penalty) if self._penalty_mode else -cost
+            return -cost if penalty is self._no_penalty else -(cost + penalty)
         scaled = (cost + penalty) / episode.reward_scale
         return -scaled if episode.reward == "scaled" else -np.log1p(scaled)
 

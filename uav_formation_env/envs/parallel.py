@@ -40,6 +40,7 @@ every view and trainer):
 | ``episode.max_formation_error`` | 0 (off) | m | truncate when a UAV is this far from its formation slot |
 | ``episode.max_velocity_error`` | 0 (off) | m/s | truncate when a UAV is this far from its reference velocity |
 | ``episode.corridor_width`` | 0 (off) | m | terminate (mission failed) when the centroid leaves the corridor around the preset route |
+| ``episode.corridor_penalty`` | 0 | - | cost added to each agent in the step that leaves the corridor (ending early must not pay) |
 | ``episode.start`` | ``"zero"`` | - | ``"random"``: start at a step drawn in [0, T); ``"staggered"``: copy b of the first reset at step b T / B |
 | ``episode.start_controller`` | ``"heuristic"`` | - | the controller that flies a copy from t = 0 to its start step |
 
@@ -163,7 +164,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         """Advance one control step δ with every live agent's normalised action."""
         if not self.agents:
             raise RuntimeError("the episode is over (or reset() was never called): call reset()")
-        step = self.episodes.step(validate_actions(actions, self.agents)[None])
+        step = self.episodes.step_validated(validate_actions(actions, self.agents)[None])
         self._result = step.result
         penalty, total = step.penalty[0], step.cost[0]
         terminated, truncated = bool(step.terminated[0]), bool(step.truncated[0])
@@ -208,12 +209,10 @@ class UAVFormationParallelEnv(ParallelEnv):
             ]
         else:
             mask = r.adjacency[0] != 0
+            keys = [f"cost_{name}" for name in terms]
+            columns = list(zip(*terms.values()))  # per agent: its terms in the order of keys
             per_agent = [
-                {
-                    **{f"cost_{name}": values[i] for name, values in terms.items()},
-                    "neighbours": mask[i],
-                }
-                for i in range(len(names))
+                {**dict(zip(keys, columns[i])), "neighbours": mask[i]} for i in range(len(names))
             ]
         return {
             agent: {

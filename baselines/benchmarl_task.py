@@ -1,0 +1,249 @@
+"""BenchMARL task for the formation env: run BenchMARL's algorithms on any named scenario.
+
+One task per registered scenario (:data:`uav_formation_env.config_io.SCENARIOS`):
+``UavFormationTask.PAPER``, ``.OPEN_FIELD``, ``.WINDY``, ``.RANDOM_OBSTACLES``, ``.N3``, ``.N8``;
+or :func:`uav_formation_task` for a YAML path or any overrides. The environment is TorchRL's
+``PettingZooWrapper`` around :func:`uav_formation_env.parallel_env`, unpatched: one group
+``"uav"`` of the N UAVs, observations (N, 47) for N = 5, continuous actions (N, 3) in [-1, 1],
+the global state of ``state()`` for centralised critics (MAPPO, MADDPG, QMIX-like mixers), and the
+numeric infos (cost terms, neighbours, ...) under ``("uav", "info")``.
+
+The task's config (:class:`UavFormationTaskConfig`) turns on the episode layer's training devices
+by default: ``log1p`` reward with J_0 = 100, divergence truncation (100 m formation error,
+40 m/s velocity error) and a 200 m mission corridor. Without them the per-episode returns are
+-2e11..-4e12 and the policy gradient is useless (see docs/integrations.md)::
+
+    from benchmarl.algorithms import MappoConfig
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models.mlp import MlpConfig
+    from uav_formation_baselines.benchmarl_task import UavFormationTask
+
+    experiment = Experiment(
+        task=UavFormationTask.PAPER.get_task(),  # or .get_task({"duration": 40.0, ...})
+        algorithm_config=MappoConfig.get_from_yaml(),
+        model_config=MlpConfig.get_from_yaml(),
+        critic_model_config=MlpConfig.get_from_yaml(),
+        seed=0,
+        config=ExperimentConfig.get_from_yaml(),
+    )
+    experiment.run()
+
+BenchMARL's hydra command line (``python benchmarl/run.py task=...``) only knows the tasks whose
+YAML ships inside benchmarl; use the Python API above (``examples/benchmarl_mappo.py`` is a
+runnable script). Needs the ``[benchmarl]`` extra (benchmarl, torchrl, torch).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from benchmarl.environments.common import Task, TaskClass
+from benchmarl.utils import DEVICE_TYPING
+from torchrl.data import Composite
+from torchrl.envs import EnvBase
+from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+from uav_formation_env import parallel_env
+from uav_formation_env.envs import resolve_with_overrides
+
+__all__ = [
+    "ENV_NAME",
+    "UavFormationTask",
+    "UavFormationTaskClass",
+    "UavFormationTaskConfig",
+    "uav_formation_task",
+]
+
+ENV_NAME = "uav_formation"
+
+
+@dataclass
+class UavFormationTaskConfig:
+    """The task's configuration (BenchMARL's ``TaskConfig``): the scenario and its overrides.
+
+    Attributes:
+        scenario: a registered scenario name (``"paper"``, ``"n3"``, ...) or a YAML path.
+        reward, reward_scale, max_formation_error, max_velocity_error, corridor_width: the
+            episode layer's training devices (``scenario.episode``); 0 turns a bound off and
+            ``reward="raw"`` gives the untransformed -J_i.
+        duration: episode length [s]; None keeps the scenario's (200 s, 1000 steps, for the paper).
+        overrides: any other scenario fields, as ``{"observer.enabled": False}``.
+        return_state: expose the global state ``state()`` (for centralised critics).
+    """
+
+    scenario: str = "paper"
+    reward: str = "log1p"
+    reward_scale: float = 100.0
+    max_formation_error: float = 100.0
+    max_velocity_error: float = 40.0
+    corridor_width: float = 200.0
+    duration: float | None = None
+    overrides: dict[str, Any] = field(default_factory=dict)
+    return_state: bool = True
+
+    def scenario_overrides(self) -> dict[str, Any]:
+        """The env overrides of this config (as for ``parallel_env(scenario, **overrides)``)."""
+        overrides: dict[str, Any] = {
+            "episode.reward": self.reward,
+            "episode.reward_scale": self.reward_scale,
+            "episode.max_formation_error": self.max_formation_error,
+            "episode.max_velocity_error": self.max_velocity_error,
+            "episode.corridor_width": self.corridor_width,
+        }
+        if self.duration is not None:
+            overrides["duration"] = self.duration
+        overrides.update(self.overrides)
+        return overrides
+
+
+def _task_config(config: dict[str, Any] | None) -> UavFormationTaskConfig:
+    """``config`` (possibly partial) validated into a :class:`UavFormationTaskConfig`."""
+    config = dict(config or {})
+    known = {f.name for f in fields(UavFormationTaskConfig)}
+    unknown = sorted(set(config) - known)
+    if unknown:
+        raise ValueError(f"unknown uav_formation task option(s) {unknown}; known: {sorted(known)}")
+    return UavFormationTaskConfig(**config)
+
+
+class UavFormationTaskClass(TaskClass):
+    """BenchMARL ``TaskClass`` of a formation scenario (see the module docstring).
+
+    Args:
+        name: the task name (a registered scenario's name in upper case, or any label).
+        config: a mapping of :class:`UavFormationTaskConfig` fields; missing ones take the
+            defaults (the training devices on).
+    """
+
+    def __init__(self, name: str, config: dict[str, Any] | None) -> None:
+        super().__init__(name=name, config=asdict(_task_config(config)))
+        # the scenario, validated now: a bad name or override fails here, not in a worker
+        self._scenario = resolve_with_overrides(
+            self.settings.scenario, self.settings.scenario_overrides()
+        )
+
+    @property
+    def settings(self) -> UavFormationTaskConfig:
+        return _task_config(self.config)
+
+    def get_env_fun(
+        self,
+        num_envs: int,
+        continuous_actions: bool,
+        seed: int | None,
+        device: DEVICE_TYPING,
+    ) -> Callable[[], EnvBase]:
+        # Not vectorised: BenchMARL stacks num_envs copies in a SerialEnv / ParallelEnv.
+        settings = copy.deepcopy(self.settings)
+        scenario = self._scenario
+
+        def make_env() -> EnvBase:
+            return PettingZooWrapper(
+                env=parallel_env(scenario),
+                return_state=settings.return_state,
+                seed=seed,
+                device=device,
+            )
+
+        return make_env
+
+    def supports_continuous_actions(self) -> bool:
+        return True
+
+    def supports_discrete_actions(self) -> bool:
+        return False
+
+    def has_render(self, env: EnvBase) -> bool:
+        return False  # the top-view renderer is for figures, not evaluation videos
+
+    def max_steps(self, env: EnvBase) -> int:
+        return self._scenario.n_steps
+
+    def group_map(self, env: EnvBase) -> dict[str, list[str]]:
+        return env.group_map
+
+    def _group_keys(self, env: EnvBase, keep: str) -> Composite | None:
+        """The observation spec with only ``(group, keep)`` per group (no state)."""
+        spec = env.observation_spec.clone()
+        for group in self.group_map(env):
+            group_spec = spec[group]
+            for key in list(group_spec.keys()):
+                if key != keep:
+                    del group_spec[key]
+            if group_spec.is_empty():
+                del spec[group]
+        if "state" in spec:
+            del spec["state"]
+        return None if spec.is_empty() else spec
+
+    def observation_spec(self, env: EnvBase) -> Composite:
+        return self._group_keys(env, "observation")
+
+    def info_spec(self, env: EnvBase) -> Composite | None:
+        return self._group_keys(env, "info")
+
+    def state_spec(self, env: EnvBase) -> Composite | None:
+        if "state" in env.observation_spec:
+            return Composite({"state": env.observation_spec["state"].clone()})
+        return None
+
+    def action_mask_spec(self, env: EnvBase) -> Composite | None:
+        return None  # every UAV acts at every step
+
+    def action_spec(self, env: EnvBase) -> Composite:
+        return env.full_action_spec
+
+    @staticmethod
+    def env_name() -> str:
+        return ENV_NAME
+
+    @staticmethod
+    def log_info(batch) -> dict[str, float]:
+        """The mean raw stage cost J per agent-step of the batch (whatever the reward)."""
+        # .keys(): iterating a TensorDict itself runs over its batch dimension
+        for group in batch.get("next").keys():  # noqa: SIM118
+            key = ("next", group, "info", "J")
+            if key in batch.keys(include_nested=True):
+                return {f"collection/{group}/cost_J": batch.get(key).float().mean().item()}
+        return {}
+
+
+class UavFormationTask(Task):
+    """The registered scenarios as BenchMARL tasks; ``get_task(config)`` takes
+    :class:`UavFormationTaskConfig` fields (missing ones default; the scenario is the member's)."""
+
+    PAPER = None
+    OPEN_FIELD = None
+    WINDY = None
+    RANDOM_OBSTACLES = None
+    N3 = None
+    N8 = None
+
+    @staticmethod
+    def associated_class():
+        return UavFormationTaskClass
+
+    def get_task(self, config: dict[str, Any] | None = None) -> UavFormationTaskClass:
+        merged = {"scenario": self.name.lower(), **(config or {})}
+        return UavFormationTaskClass(name=self.name, config=merged)
+
+    def get_from_yaml(self, path: str | None = None) -> UavFormationTaskClass:
+        """The task with the defaults, or with the config of the YAML file ``path``."""
+        if path is None:
+            return self.get_task()
+        import yaml
+
+        with open(path, encoding="utf-8") as handle:
+            return self.get_task(yaml.safe_load(handle) or {})
+
+
+def uav_formation_task(
+    scenario: str = "paper", name: str | None = None, **config: Any
+) -> UavFormationTaskClass:
+    """A task for any scenario name or YAML path, with :class:`UavFormationTaskConfig` options,
+    e.g. ``uav_formation_task("my_scenario.yaml", duration=60.0, corridor_width=0.0)``."""
+    label = name or str(scenario).rsplit("/", 1)[-1].split(".")[0].upper()
+    return UavFormationTaskClass(name=label, config={"scenario": str(scenario), **config})
