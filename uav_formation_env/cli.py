@@ -151,15 +151,26 @@ def _evaluate(args: argparse.Namespace) -> int:
     scenario = _scenario_for(args)
     seeds = _seeds(args)
     out = _out_dir(args.out)
-    policy = make_policy(args.policy, scenario, algo=args.algo)
-    batch = run_episodes(
-        scenario,
-        policy,
-        seeds,
-        policy_name=args.policy,
-        progress=not args.quiet,
-        desc=f"evaluate {Path(args.policy).name} x {len(seeds)} seeds",
-    )
+    desc = f"evaluate {Path(args.policy).name} x {len(seeds)} seeds"
+    if args.backend == "ray":
+        from uav_formation_env.distributed import ray_session, run_episodes_ray
+
+        make_policy(args.policy, scenario, algo=args.algo)  # bad names fail here, not in a task
+        with ray_session(args.address):
+            batch = run_episodes_ray(
+                scenario,
+                args.policy,
+                seeds,
+                algo=args.algo,
+                chunk_size=args.chunk_size,
+                progress=not args.quiet,
+                desc=desc + " (ray)",
+            )
+    else:
+        policy = make_policy(args.policy, scenario, algo=args.algo)
+        batch = run_episodes(
+            scenario, policy, seeds, policy_name=args.policy, progress=not args.quiet, desc=desc
+        )
     summary = json_ready(summarise(batch))
     write_records(batch, out / "records.csv")
     write_json(summary, out / "summary.json")
@@ -219,6 +230,9 @@ def _reproduce(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         records=args.records,
         game_variants=[] if args.game_variants == ["none"] else args.game_variants,
+        backend=args.backend,
+        address=args.address,
+        chunk_size=args.chunk_size,
     )
     summary = result.summary
     print(f"wall time {summary['wall_time_s']:.1f} s ({len(summary['seeds'])} seeds)")
@@ -306,8 +320,21 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
         "--quick", action="store_true", help="20 s episodes (smoke test; --duration wins)"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-
-
+    parser.add_argument(
+        "--backend",
+        choices=["local", "ray"],
+        default="local",
+        help="'ray': seeds (and variants) as Ray tasks, the same numbers ([ray] extra)",
+    )
+    parser.add_argument(
+        "--address",
+        default=None,
+        help="Ray cluster to use with --backend ray (e.g. auto or ray://HEAD:10001; "
+        "None: start a local Ray instance)",
+    )
+    parser.add_argument(
+        "--chunk-size", type=integer_at_least(1), default=1, help="seeds per Ray task"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -71,6 +71,7 @@ from uav_formation_env.evaluation.output import (
 from uav_formation_env.evaluation.runner import (
     EpisodeBatch,
     ProgressLike,
+    concatenate_batches,
     policy_plans,
     run_episodes,
 )
@@ -97,6 +98,7 @@ __all__ = [
     "RandomPolicy",
     "SB3Policy",
     "formation_rmse",
+    "concatenate_batches",
     "json_ready",
     "make_policy",
     "mean_ci95",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -68,6 +69,41 @@ class EpisodeBatch:
     @property
     def wall_seconds(self) -> float:
         return float(self.policy_seconds.sum() + self.sim_seconds.sum())
+
+
+# EpisodeBatch fields whose batch axis is the first (B, O); the time series have it second
+_BATCH_FIRST = ("activation_time", "restore_time", "case")
+# summed over parts: the compute time of every part's step
+_TIMINGS = ("policy_seconds", "sim_seconds")
+
+
+def concatenate_batches(parts: Sequence[EpisodeBatch]) -> EpisodeBatch:
+    """One batch of the episodes of ``parts`` (same scenario, policy and length), in order.
+
+    Every copy's numbers depend on its seed alone, so a batch run in parts (for example as Ray
+    tasks) equals the batch run at once, up to the wall times: ``policy_seconds`` and
+    ``sim_seconds`` become the parts' summed compute time per step.
+    """
+    if not parts:
+        raise ValueError("concatenate_batches needs at least one batch")
+    first = parts[0]
+    if any(p.scenario != first.scenario or p.n_steps != first.n_steps for p in parts):
+        raise ValueError("batches of different scenarios or lengths cannot be concatenated")
+    fields: dict = {"seeds": [s for p in parts for s in p.seeds]}
+    for f in dataclasses.fields(EpisodeBatch):
+        name = f.name
+        values = [getattr(p, name) for p in parts]
+        if name in ("scenario", "seeds", "policy_name", "t"):
+            fields.setdefault(name, values[0])
+        elif name in _TIMINGS:
+            fields[name] = np.sum(values, axis=0)
+        elif name == "cost_terms":
+            fields[name] = {k: np.concatenate([v[k] for v in values], axis=1) for k in values[0]}
+        elif any(v is None for v in values):
+            fields[name] = None
+        else:
+            fields[name] = np.concatenate(values, axis=0 if name in _BATCH_FIRST else 1)
+    return EpisodeBatch(**fields)
 
 
 ProgressLike = bool | Callable[[int], None]

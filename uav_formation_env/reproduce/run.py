@@ -73,6 +73,9 @@ def reproduce(
     policy_seed: int | None = None,
     variants: Sequence[str] = tuple(VARIANTS),
     game_variants: Sequence[str] = tuple(GAME_VARIANTS),
+    backend: str = "local",
+    address: str | None = None,
+    chunk_size: int = 1,
 ) -> Reproduction:
     """Fly the four variants on the same seeds and write the tables, figures and report.
 
@@ -93,7 +96,14 @@ def reproduce(
             names of :data:`GAME_VARIANTS` or paths of stable-baselines3 models; empty to skip.
             Every variant's Nash gap is measured at every step (``nash_gap.csv``,
             ``fig10_nash_gap.png``, a section of ``REPORT.md``).
+        backend: ``"local"`` (processes on this machine, ``jobs``) or ``"ray"`` (every
+            (variant, ``chunk_size`` seeds) a Ray task, on the cluster at ``address`` or a local
+            Ray instance; :mod:`uav_formation_env.distributed`). The numbers do not depend on it.
+        address: the Ray cluster (None: start a local instance).
+        chunk_size: seeds per Ray task.
     """
+    if backend not in ("local", "ray"):
+        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     base = resolve_scenario(scenario)
@@ -111,7 +121,11 @@ def reproduce(
     everything = [*variants, *game_variants]
     jobs = max(1, min(int(jobs), len(everything)))
     start = time.perf_counter()
-    batches = _run_all(everything, base, seeds, duration, policy_seed, jobs, progress)
+    if backend == "ray":
+        batches = _run_all_ray(everything, base, seeds, duration, policy_seed, progress, address,
+                               chunk_size)  # fmt: skip
+    else:
+        batches = _run_all(everything, base, seeds, duration, policy_seed, jobs, progress)
     wall = time.perf_counter() - start
     all_batches = {v: batches[v] for v in everything}
     batches = {v: batches[v] for v in variants}
@@ -173,6 +187,32 @@ def _run_all(
                     results[variant] = batch
         bar.close()
     return results
+
+
+def _run_all_ray(
+    variants: list[str],
+    base: Scenario,
+    seeds: list[int],
+    duration: float | None,
+    policy_seed: int | None,
+    progress: bool,
+    address: str | None,
+    chunk_size: int,
+) -> dict[str, EpisodeBatch]:
+    """Every (variant, seed chunk) as a Ray task, with the Nash gap measured (as locally)."""
+    from uav_formation_env.distributed import ray_session, run_variants_ray
+
+    jobs = {v: (variant_scenario(base, v, duration), variant_spec(v)[0]) for v in variants}
+    with ray_session(address):
+        return run_variants_ray(
+            jobs,
+            seeds,
+            chunk_size=chunk_size,
+            nash_gap=True,
+            policy_seed=policy_seed,
+            progress=progress,
+            desc=f"{len(variants)} variants x {len(seeds)} seeds (ray)",
+        )
 
 
 def available_cpus() -> int:
