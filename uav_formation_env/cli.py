@@ -429,8 +429,8 @@ def build_parser() -> argparse.ArgumentParser:
     # Listed here for --help only: main() hands every argument after "train" to the baselines.
     sub.add_parser(
         "train",
-        help="train PPO or SAC with one policy shared by all UAVs (the [rl] extra; "
-        "`uav-formation train --help` for its options)",
+        help="train PPO or SAC (SB3, the [rl] extra) or --algo rllib-ppo (RLlib, the [rllib] "
+        "extra) with one policy shared by all UAVs (`uav-formation train --help` for options)",
         add_help=False,
     )
     return parser
@@ -439,6 +439,11 @@ def build_parser() -> argparse.ArgumentParser:
 def _train(argv: list[str]) -> int:
     from uav_formation_env.extras import require
 
+    if "rllib-ppo" in argv:  # --algo rllib-ppo: the RLlib recipe, in its own environment
+        require("ray.rllib", "uav-formation train --algo rllib-ppo")
+        from uav_formation_baselines.rllib_ppo import main as rllib_main
+
+        return int(rllib_main(argv))
     require("stable_baselines3", "uav-formation train")
     from uav_formation_baselines.train import main as train_main
 

@@ -10,6 +10,8 @@ EXTRAS = {
     "torch": "rl",
     "numba": "fast",
     "imageio": "video",
+    "ray": "ray",
+    "ray.rllib": "rllib",
     "imageio_ffmpeg": "video",
 }
 
@@ -28,7 +30,7 @@ def require(module: str, purpose: str) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError as error:
-        extra = EXTRAS.get(module.split(".")[0], "rl")
+        extra = EXTRAS.get(module, EXTRAS.get(module.split(".")[0], "rl"))
         raise MissingExtraError(
             f"{purpose} needs {module.split('.')[0]}, from the [{extra}] extra: "
             f"pip install 'uav-formation-env[{extra}]' ({error})"

@@ -1,16 +1,16 @@
-"""RLlib smoke test (new API stack), run in its own virtual environment by tests/rllib/run.sh.
+"""RLlib smoke tests (new API stack), run in their own virtual environment by tests/rllib/run.sh.
 
 ``ray[rllib]`` pins a gymnasium older than the main environment's, so this folder is not collected
-by the main ``python -m pytest`` run. One PPO iteration of examples/rllib_ppo.py on the paper's
-scenario with the training devices: finite episode returns of a sane size, and the shared
-module's parameters changed.
+by the main ``python -m pytest`` run. One PPO iteration of the recipe
+(:mod:`uav_formation_baselines.rllib_ppo`) on the paper's scenario with the training devices:
+finite returns of a sane size, the shared module's parameters changed, a checkpoint that resumes
+and an exported policy that ``uav-formation evaluate`` runs.
 """
 
 from __future__ import annotations
 
-import importlib.util
+import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,20 +18,12 @@ import pytest
 
 pytest.importorskip("ray.rllib", reason="ray[rllib] is not installed (run tests/rllib/run.sh)")
 
-EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "rllib_ppo.py"
-
-
-def load_example():
-    spec = importlib.util.spec_from_file_location("rllib_ppo_example", EXAMPLE)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+from uav_formation_baselines import rllib_ppo  # noqa: E402
+from uav_formation_env.cli import main as cli  # noqa: E402
 
 
 def test_parallel_pettingzoo_env_wraps_the_env_unpatched() -> None:
-    example = load_example()
-    env = example.make_env({"scenario": "paper", **example.TRAINING_DEVICES})
+    env = rllib_ppo.make_env({"scenario": "paper", **rllib_ppo.TRAINING_DEVICES})
     obs, infos = env.reset(seed=0)
     assert sorted(obs) == [f"uav_{i}" for i in range(5)]
     assert obs["uav_0"].shape == (47,)
@@ -41,11 +33,48 @@ def test_parallel_pettingzoo_env_wraps_the_env_unpatched() -> None:
     assert all(np.isfinite(r) and abs(r) < 50.0 for r in rewards.values())  # log1p: a few units
 
 
-def test_one_ppo_iteration_with_a_shared_module() -> None:
-    example = load_example()
-    result = example.main(["--quick", "--num-cpus", "1"])
-    returns = result["returns"]
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> Path:
+    """One quick PPO iteration through the command line, on a local Ray instance."""
+    out = tmp_path_factory.mktemp("rllib")
+    assert (
+        cli(["train", "--algo", "rllib-ppo", "--quick", "--num-cpus", "2", "--out", str(out)]) == 0
+    )
+    return out
+
+
+def test_one_ppo_iteration_with_a_shared_module(run: Path) -> None:
+    import yaml
+
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    returns = config["returns"]
     assert len(returns) == 1
     assert all(math.isfinite(r) for r in returns), returns
     assert all(abs(r) < 1e6 for r in returns), returns  # raw returns are -2e11..-4e12
-    assert result["parameters_changed"]
+    assert config["parameters_changed"]
+    assert (run / "checkpoint").is_dir() and (run / "progress.csv").is_file()
+
+
+def test_evaluate_from_the_exported_policy(run: Path, tmp_path: Path) -> None:
+    out = tmp_path / "eval"
+    args = [
+        "evaluate",
+        "--policy",
+        str(run / "policy.pt"),
+        "--scenario",
+        str(run / "scenario.yaml"),
+    ]
+    assert cli([*args, "--seeds", "2", "--quiet", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mission"]["episodes"] == 2
+    assert math.isfinite(summary["realised_cost_mean"])
+    # the run directory names the policy too
+    assert cli(["evaluate", "--policy", str(run), "--scenario", str(run / "scenario.yaml"),
+                "--seeds", "1", "--quiet", "--out", str(tmp_path / "dir")]) == 0  # fmt: skip
+
+
+def test_training_resumes_from_the_checkpoint(run: Path) -> None:
+    before = (run / "policy.pt").read_bytes()
+    assert cli(["train", "--algo", "rllib-ppo", "--quick", "--num-cpus", "2", "--resume",
+                "--out", str(run)]) == 0  # fmt: skip
+    assert (run / "policy.pt").read_bytes() != before

@@ -1,4 +1,5 @@
-"""A saved stable-baselines3 model as a policy, shared by every UAV (parameter sharing).
+"""Saved learned policies, shared by every UAV (parameter sharing): a stable-baselines3 model or a
+TorchScript module (the RLlib recipe's export).
 
 stable-baselines3 is never imported at module import: :class:`SB3Policy` loads it through
 :func:`uav_formation_env.extras.require` when a model file is opened (the ``[rl]`` extra).
@@ -16,7 +17,7 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.core.observation import observation_dim
 from uav_formation_env.extras import require
 
-__all__ = ["SB3_ALGORITHMS", "SB3Policy"]
+__all__ = ["SB3_ALGORITHMS", "SB3Policy", "TorchScriptPolicy"]
 
 SB3_ALGORITHMS = ("PPO", "SAC", "TD3", "A2C", "DDPG")  # tried in this order on a model file
 
@@ -108,3 +109,45 @@ class SB3Policy:
             flat = self.normalizer.normalize_obs(flat)
         actions, _ = self.model.predict(flat, deterministic=True)
         return np.clip(np.asarray(actions, dtype=float).reshape(batch, n, 3), -1.0, 1.0)
+
+
+class TorchScriptPolicy:
+    """A policy exported as TorchScript (e.g. the RLlib recipe's ``policy.pt``), shared by every
+    UAV: observations (B·N, dim) float32 -> (B·N, 2·3) the Gaussian's mean and log-std; the
+    action is the mean, clipped to [-1, 1]. Needs torch only (the ``[rl]`` extra), not the
+    trainer that made it.
+
+    Args:
+        path: the ``.pt`` file.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileNotFoundError(f"model file not found: {str(path)!r}")
+        torch = require("torch", "a TorchScript policy")
+        self._torch = torch
+        self.module = torch.jit.load(str(self.path), map_location="cpu").eval()
+
+    def check_scenario(self, scenario: Scenario) -> None:
+        """``ValueError`` naming both sizes if the module cannot take the scenario's observation
+        (tried on one observation of zeros)."""
+        dim = observation_dim(scenario.n_uav)
+        try:
+            self._forward(np.zeros((1, dim), dtype=np.float32))
+        except Exception as error:  # noqa: BLE001 - torch raises several kinds on a size mismatch
+            raise ValueError(
+                f"the model {str(self.path)!r} cannot act on observations of {dim} values "
+                f"(scenario {scenario.name!r}, {scenario.n_uav} UAVs): {type(error).__name__}"
+            ) from None
+
+    def _forward(self, flat: np.ndarray) -> np.ndarray:
+        with self._torch.no_grad():
+            out = self.module(self._torch.as_tensor(flat)).numpy()
+        return out[:, :3]  # the mean of the diagonal Gaussian
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        obs = np.asarray(obs, dtype=np.float32)
+        batch, n, dim = obs.shape
+        mean = self._forward(obs.reshape(batch * n, dim))
+        return np.clip(mean.astype(float).reshape(batch, n, 3), -1.0, 1.0)

@@ -22,7 +22,7 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.policies.best_response import ExactConfig
-from uav_formation_env.policies.learned import SB3Policy
+from uav_formation_env.policies.learned import SB3Policy, TorchScriptPolicy
 from uav_formation_env.policies.nash import NashConfig
 from uav_formation_env.policies.optimizers.config import (
     OPTIMIZERS,
@@ -73,8 +73,9 @@ POLICY_LABELS = {
 }
 POLICY_HELP = (
     f"{', '.join(DMPC_OPTIMIZERS)} (the reference DMPC with that solver), "
-    f"{', '.join(SIMPLE_POLICIES)}, or a stable-baselines3 model path (.zip; a vecnormalize.pkl "
-    "beside it is applied)"
+    f"{', '.join(SIMPLE_POLICIES)}, a stable-baselines3 model path (.zip; a vecnormalize.pkl "
+    "beside it is applied), or a TorchScript policy (.pt, or a run directory holding policy.pt: "
+    "the RLlib recipe's export)"
 )
 
 
@@ -119,6 +120,12 @@ def make_policy(
     if key in _SIMPLE:
         return _SIMPLE[key](scenario, seed)
     path = Path(name)
+    if path.is_dir() and (path / "policy.pt").is_file():
+        path = path / "policy.pt"  # a run directory of the RLlib recipe
+    if path.suffix == ".pt":
+        exported = TorchScriptPolicy(path)
+        exported.check_scenario(scenario)
+        return exported
     if path.is_file() or path.with_suffix(".zip").is_file():
         policy = SB3Policy(path, algo)
         policy.check_scenario(scenario)
@@ -126,6 +133,6 @@ def make_policy(
     if path.suffix == ".zip" or len(path.parts) > 1:
         raise FileNotFoundError(f"policy model file not found: {name!r}")
     raise ValueError(
-        f"unknown policy {name!r}: expected one of {list(POLICY_NAMES)} or the path of a "
-        "stable-baselines3 model (.zip)"
+        f"unknown policy {name!r}: expected one of {list(POLICY_NAMES)}, the path of a "
+        "stable-baselines3 model (.zip) or of a TorchScript policy (.pt)"
     )
