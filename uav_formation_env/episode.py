@@ -88,17 +88,16 @@ def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
         # check for all agents. Anything unusual falls through to the agent-by-agent checks,
         # which name the culprit.
         try:
-            stacked = np.array([actions[agent] for agent in agents])
+            values = [actions[agent] for agent in agents]
+            # real numbers only (no strings or complex numbers coerced), converted once;
+            # result_type refuses anything but arrays and numbers (to the checked path)
+            real = np.result_type(*values).kind in "iuf"
+            stacked = np.array(values, dtype=float) if real else None
         except (KeyError, TypeError, ValueError):
             stacked = None
-        if (
-            stacked is not None
-            and stacked.dtype.kind in "iuf"
-            and stacked.shape == (len(agents), 3)
-            and np.isfinite(stacked).all()
-        ):
+        if stacked is not None and stacked.shape == (len(agents), 3) and np.isfinite(stacked).all():
             # np.clip for finite values, without its Python wrappers
-            return np.minimum(np.maximum(stacked.astype(float), -1.0), 1.0)
+            return np.minimum(np.maximum(stacked, -1.0), 1.0)
     if not isinstance(actions, dict):
         raise ValueError(f"actions must be a dict {{agent: (3,) array}}, got {type(actions)}")
     unknown = sorted(set(actions) - set(agents))
@@ -145,7 +144,7 @@ def global_state(sim: FormationSim, result: StepResult) -> np.ndarray:
     return np.concatenate(parts, axis=-1).astype(np.float32)
 
 
-@dataclass
+@dataclass(slots=True)
 class EpisodeStep:
     """What a reset or a step of B copies means to the agents (arrays over copies B, agents N).
 
@@ -160,12 +159,16 @@ class EpisodeStep:
     penalty: np.ndarray  # (B, N) collision penalty ("penalty" mode) + corridor penalty
     terminated: np.ndarray  # (B,) bool: collision in "terminate" mode or left the corridor
     truncated: np.ndarray  # (B,) bool: duration reached or diverged (and not terminated)
-    collided: np.ndarray  # (B,) bool: some UAV collided in this step
     left_corridor: np.ndarray  # (B,) bool
     diverged: np.ndarray  # (B,) bool
     result: StepResult
     final_observation: np.ndarray | None = None  # (B, N, dim) where autoreset, else None
     reset: np.ndarray | None = None  # (B,) bool: copies reset after this step (autoreset)
+
+    @property
+    def collided(self) -> np.ndarray:
+        """(B,) bool: some UAV collided in this step."""
+        return self.result.collision.any(axis=1)
 
     @property
     def done(self) -> np.ndarray:
@@ -237,7 +240,6 @@ class FormationEpisodes:
             penalty=zeros,
             terminated=no,
             truncated=no,
-            collided=result.collision.any(axis=1),
             left_corridor=no,
             diverged=no,
             result=result,
@@ -285,11 +287,10 @@ class FormationEpisodes:
         result = self.sim.step(clipped * self.u_max)
         cost = result.cost.total
         penalty = self.penalties(result)
-        collided = result.collision.any(axis=1)
         left = self._left_corridor(result) if self._corridor else self._no_copy
         if self._corridor and left.any() and self.scenario.episode.corridor_penalty > 0:
             penalty = penalty + self.scenario.episode.corridor_penalty * left[:, None]
-        terminated = left | collided if self._end_on_collision else left
+        terminated = left | result.collision.any(axis=1) if self._end_on_collision else left
         diverged = self._diverged(result) & ~terminated if self._divergence else self._no_copy
         if self._corridor or self._end_on_collision or self._divergence:
             truncated = (result.truncated | diverged) & ~terminated
@@ -302,13 +303,11 @@ class FormationEpisodes:
             penalty=penalty,
             terminated=terminated,
             truncated=truncated,
-            collided=collided,
             left_corridor=left,
             diverged=diverged,
             result=result,
         )
-        done = step.done
-        if self.autoreset and done.any():
+        if self.autoreset and (done := step.done).any():
             step.final_observation = step.observation
             step.reset = done
             fresh = self.reset(seed=None, mask=done)

@@ -110,6 +110,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         if info_mode not in INFO_MODES:
             raise ValueError(f"info_mode must be one of {INFO_MODES}, got {info_mode!r}")
         self.info_mode = info_mode
+        self._cost_keys: tuple[str, ...] | None = None  # "cost_<term>", from the first step
         self.scenario = scenario
         self.render_mode = render_mode
         self.episodes = FormationEpisodes(scenario, batch_size=1)
@@ -191,7 +192,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         if total is None:
             total = r.cost.total[0]
         total = total.tolist()
-        terms = {name: value[0].tolist() for name, value in r.cost.as_dict().items()}
+        cost_terms = r.cost.as_dict()
         z = r.z[0].copy()
         disturbance, estimate = r.disturbance[0].copy(), r.estimate[0].copy()
         reference = r.reference_velocity[0].copy()
@@ -199,6 +200,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         obstacle, separation = r.obstacle_distance[0].tolist(), r.min_separation[0].tolist()
         penalty, t = penalty.tolist(), float(r.t[0])
         if self.info_mode == "rich":
+            terms = {name: value[0].tolist() for name, value in cost_terms.items()}
             neighbours = self._neighbour_names(r.adjacency[0])
             per_agent = [
                 {
@@ -208,29 +210,35 @@ class UAVFormationParallelEnv(ParallelEnv):
                 for i in range(len(names))
             ]
         else:
-            mask = r.adjacency[0] != 0
-            keys = [f"cost_{name}" for name in terms]
-            columns = list(zip(*terms.values()))  # per agent: its terms in the order of keys
-            per_agent = [
-                {**dict(zip(keys, columns[i])), "neighbours": mask[i]} for i in range(len(names))
-            ]
+            if self._cost_keys is None:
+                self._cost_keys = tuple(f"cost_{name}" for name in cost_terms)
+            keys = self._cost_keys
+            columns = [value[0].tolist() for value in cost_terms.values()]
+            per_agent = [dict(zip(keys, row)) for row in zip(*columns)]
+            for info, row in zip(per_agent, r.adjacency[0] != 0):  # row views of the mask
+                info["neighbours"] = row
+        # iterating the arrays makes the per-agent row views in C (cheaper than indexing)
+        rows = zip(
+            names, total, per_agent, disturbance, estimate, reference, groups, obstacle,
+            separation, collision, z[:, :3], z[:, 3:], penalty,
+        )  # fmt: skip
         return {
             agent: {
-                "J": total[i],
-                **per_agent[i],
-                "disturbance": disturbance[i],
-                "disturbance_estimate": estimate[i],
-                "reference_velocity": reference[i],
-                "group": groups[i],
-                "obstacle_distance": obstacle[i],
-                "min_separation": separation[i],
-                "collision": collision[i],
-                "position": z[i, :3],
-                "velocity": z[i, 3:],
-                "penalty": penalty[i],
+                "J": j,
+                **own,
+                "disturbance": d,
+                "disturbance_estimate": e,
+                "reference_velocity": ref,
+                "group": g,
+                "obstacle_distance": o,
+                "min_separation": s,
+                "collision": c,
+                "position": p,
+                "velocity": v,
+                "penalty": pen,
                 "t": t,
             }
-            for i, agent in enumerate(names)
+            for agent, j, own, d, e, ref, g, o, s, c, p, v, pen in rows
         }
 
     def _neighbour_names(self, adjacency: np.ndarray) -> tuple[tuple[str, ...], ...]:
