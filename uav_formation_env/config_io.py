@@ -22,11 +22,21 @@ from uav_formation_env.scenarios import make_scenario, windy_scenario
 _T = typing.TypeVar("_T")
 
 
+_SCALARS = (int, float, bool, str, type(None))
+# libyaml's safe loader and dumper where PyYAML has them: the pure-Python ones took 29 s for the
+# 10^6 adjacency entries of N = 1000
+_SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_SAFE_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
 def to_dict(obj: Any) -> Any:
     """Plain-data (dict/list/float) form of a config dataclass, fit for YAML or JSON."""
     if dataclasses.is_dataclass(obj):
         return {f.name: to_dict(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, tuple | list):
+        # a row of scalars in one step: an adjacency of N = 1000 has 10^6 entries
+        if all(type(item) in _SCALARS for item in obj):
+            return list(obj)
         return [to_dict(item) for item in obj]
     return obj
 
@@ -40,6 +50,11 @@ def _convert(value: Any, hint: Any, path: str) -> Any:
             raise ValueError(f"invalid scenario field '{path}': expected a list, got {value!r}")
         args = typing.get_args(hint)
         if len(args) == 2 and args[1] is Ellipsis:
+            scalar = _SCALAR_CHECKS.get(args[0])
+            if scalar is not None and all(scalar(item) for item in value):
+                # a row of valid scalars at once (10^6 adjacency entries for N = 1000); any bad
+                # entry takes the item-by-item path below, which names it
+                return tuple(float(item) for item in value) if args[0] is float else tuple(value)
             return tuple(_convert(item, args[0], f"{path}[{k}]") for k, item in enumerate(value))
         if len(value) != len(args):
             raise ValueError(
@@ -65,6 +80,12 @@ def _convert(value: Any, hint: Any, path: str) -> Any:
             raise ValueError(f"invalid scenario field '{path}': expected a string, got {value!r}")
         return value
     return value
+
+
+_SCALAR_CHECKS: dict[Any, Any] = {
+    int: lambda x: type(x) is int,
+    float: lambda x: type(x) in (int, float),
+}
 
 
 def _build(cls: type[_T], data: Any, path: str) -> _T:
@@ -140,7 +161,7 @@ def load_scenario(path: str | Path) -> Scenario:
     """
     with open(path, encoding="utf-8") as stream:
         try:
-            data = yaml.safe_load(stream)
+            data = yaml.load(stream, Loader=_SAFE_LOADER)
         except yaml.YAMLError as error:
             mark = getattr(error, "problem_mark", None)
             where = "" if mark is None else f" at line {mark.line + 1}, column {mark.column + 1}"
@@ -152,7 +173,7 @@ def load_scenario(path: str | Path) -> Scenario:
 def save_scenario(scenario: Scenario, path: str | Path) -> None:
     """Write every field of a scenario to a YAML file."""
     with open(path, "w", encoding="utf-8") as stream:
-        yaml.safe_dump(to_dict(scenario), stream, sort_keys=False)
+        yaml.dump(to_dict(scenario), stream, Dumper=_SAFE_DUMPER, sort_keys=False)
 
 
 def paper_scenario() -> Scenario:
