@@ -231,13 +231,12 @@ class FormationEpisodes:
         starts = self._start_steps(reset)
         if starts.any():
             result = self._fly_to(starts)
-        zeros = np.zeros((self.batch_size, self.n_uav))
-        no = np.zeros(self.batch_size, dtype=bool)
+        zero, no = self._no_penalty, self._no_copy  # a reset rewards nothing and ends nothing
         step = EpisodeStep(
             observation=observations_of(self.sim, result),
-            reward=zeros,
-            cost=zeros,
-            penalty=zeros,
+            reward=zero,
+            cost=zero,
+            penalty=zero,
             terminated=no,
             truncated=no,
             left_corridor=no,

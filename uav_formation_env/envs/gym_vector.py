@@ -62,9 +62,19 @@ class _BatchedView(gymnasium.vector.VectorEnv):
         self.n_uav = self.scenario.n_uav
         self.obs_dim = observation_dim(self.n_uav)
 
-    def _reset(self, seed: int | list[int] | None) -> EpisodeStep:
+    def _spaces(self, entries: int, obs_size: int, act_size: int) -> None:
+        """Single and batched spaces of ``entries`` rows of ``obs_size`` / ``act_size`` values."""
+        self.num_envs = entries
+        bound = OBSERVATION_BOUND
+        self.single_observation_space = spaces.Box(-bound, bound, (obs_size,), np.float32)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (act_size,), np.float32)
+        self.observation_space = batch_space(self.single_observation_space, entries)
+        self.action_space = batch_space(self.single_action_space, entries)
+
+    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
         # an int seeds copy b with seed + b (Gymnasium's and SB3's convention)
-        return self.episodes.reset(seed=seed)
+        step = self.episodes.reset(seed=seed)
+        return step.observation.reshape(self.num_envs, -1), {}
 
     def _infos(self, step: EpisodeStep, rows: int) -> dict[str, Any]:
         """Per-entry arrays: the raw stage cost ``J`` and the ``collision`` flags."""
@@ -106,17 +116,7 @@ class FormationVectorEnv(_BatchedView):
         if render_mode is not None:
             raise ValueError(f"render_mode must be None for the vector view, got {render_mode!r}")
         super().__init__(num_envs, scenario, overrides)
-        self.num_envs = int(num_envs)
-        n, dim = self.n_uav, self.obs_dim
-        bound = OBSERVATION_BOUND
-        self.single_observation_space = spaces.Box(-bound, bound, (n * dim,), np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, (3 * n,), np.float32)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-
-    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        step = self._reset(seed)
-        return step.observation.reshape(self.num_envs, -1), {}
+        self._spaces(int(num_envs), self.n_uav * self.obs_dim, 3 * self.n_uav)
 
     def step(self, actions: np.ndarray):
         actions = np.asarray(actions)
@@ -148,16 +148,7 @@ class FormationAgentVectorEnv(_BatchedView):
     def __init__(self, num_copies: int = 1, scenario: ScenarioLike = "paper", **overrides: Any):
         super().__init__(num_copies, scenario, overrides)
         self.num_copies = int(num_copies)
-        self.num_envs = self.num_copies * self.n_uav
-        bound = OBSERVATION_BOUND
-        self.single_observation_space = spaces.Box(-bound, bound, (self.obs_dim,), np.float32)
-        self.single_action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-
-    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        step = self._reset(seed)
-        return step.observation.reshape(self.num_envs, -1), {}
+        self._spaces(self.num_copies * self.n_uav, self.obs_dim, 3)
 
     def step(self, actions: np.ndarray):
         actions = np.asarray(actions)
