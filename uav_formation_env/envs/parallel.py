@@ -83,6 +83,22 @@ def agent_names(n_uav: int) -> list[str]:
     return [f"uav_{i}" for i in range(n_uav)]
 
 
+def _common(d, e, ref, g, o, s, c, p, v, pen) -> dict:
+    """The info entries both info modes share, for one agent."""
+    return {
+        "disturbance": d,
+        "disturbance_estimate": e,
+        "reference_velocity": ref,
+        "group": g,
+        "obstacle_distance": o,
+        "min_separation": s,
+        "collision": c,
+        "position": p,
+        "velocity": v,
+        "penalty": pen,
+    }
+
+
 class UAVFormationParallelEnv(ParallelEnv):
     """PettingZoo ParallelEnv of the scenario (see the module docstring for the contract).
 
@@ -110,7 +126,6 @@ class UAVFormationParallelEnv(ParallelEnv):
         if info_mode not in INFO_MODES:
             raise ValueError(f"info_mode must be one of {INFO_MODES}, got {info_mode!r}")
         self.info_mode = info_mode
-        self._cost_keys: tuple[str, ...] | None = None  # "cost_<term>", from the first step
         self.scenario = scenario
         self.render_mode = render_mode
         self.episodes = FormationEpisodes(scenario, batch_size=1)
@@ -199,46 +214,53 @@ class UAVFormationParallelEnv(ParallelEnv):
         groups, collision = r.groups[0].tolist(), r.collision[0].tolist()
         obstacle, separation = r.obstacle_distance[0].tolist(), r.min_separation[0].tolist()
         penalty, t = penalty.tolist(), float(r.t[0])
+        rows = (
+            disturbance, estimate, reference, groups, obstacle, separation, collision,
+            z[:, :3], z[:, 3:], penalty,
+        )  # fmt: skip
         if self.info_mode == "rich":
             terms = {name: value[0].tolist() for name, value in cost_terms.items()}
             neighbours = self._neighbour_names(r.adjacency[0])
-            per_agent = [
+            own = [
                 {
                     "cost_terms": {name: values[i] for name, values in terms.items()},
                     "neighbours": list(neighbours[i]),
                 }
                 for i in range(len(names))
             ]
-        else:
-            if self._cost_keys is None:
-                self._cost_keys = tuple(f"cost_{name}" for name in cost_terms)
-            keys = self._cost_keys
-            columns = [value[0].tolist() for value in cost_terms.values()]
-            per_agent = [dict(zip(keys, row)) for row in zip(*columns)]
-            for info, row in zip(per_agent, r.adjacency[0] != 0):  # row views of the mask
-                info["neighbours"] = row
-        # iterating the arrays makes the per-agent row views in C (cheaper than indexing)
-        rows = zip(
-            names, total, per_agent, disturbance, estimate, reference, groups, obstacle,
-            separation, collision, z[:, :3], z[:, 3:], penalty,
-        )  # fmt: skip
+            return {
+                agent: {"J": j, **extra, **_common(*common), "t": t}
+                for agent, j, extra, *common in zip(names, total, own, *rows)
+            }
+        # numeric: one dict per agent in one go, the five terms of CostTerms unpacked by name
+        # (this runs every step: 2% of a B = 1 step less than merging per-agent dicts, measured
+        # with callgrind); iterating the arrays makes the row views in C, cheaper than indexing
+        f, e, m, v, s = (value[0].tolist() for value in cost_terms.values())
+        mask = r.adjacency[0] != 0
         return {
             agent: {
                 "J": j,
-                **own,
-                "disturbance": d,
-                "disturbance_estimate": e,
+                "cost_formation": cf,
+                "cost_energy": ce,
+                "cost_terminal": cm,
+                "cost_velocity": cv,
+                "cost_separation": cs,
+                "neighbours": nb,
+                "disturbance": dist,
+                "disturbance_estimate": est,
                 "reference_velocity": ref,
                 "group": g,
                 "obstacle_distance": o,
-                "min_separation": s,
+                "min_separation": sep,
                 "collision": c,
                 "position": p,
-                "velocity": v,
+                "velocity": vel,
                 "penalty": pen,
                 "t": t,
             }
-            for agent, j, own, d, e, ref, g, o, s, c, p, v, pen in rows
+            for agent, j, cf, ce, cm, cv, cs, nb, dist, est, ref, g, o, sep, c, p, vel, pen in zip(
+                names, total, f, e, m, v, s, mask, *rows
+            )
         }
 
     def _neighbour_names(self, adjacency: np.ndarray) -> tuple[tuple[str, ...], ...]:
