@@ -36,15 +36,8 @@ import yaml
 
 from uav_formation_env.cli import OneLineParser, integer_at_least, positive_number
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
+from uav_formation_env.episode import TRAINING_DEVICES
 
-# The episode layer's training devices: log-compressed reward, divergence truncation, corridor.
-TRAINING_DEVICES: dict[str, Any] = {
-    "episode__reward": "log1p",
-    "episode__reward_scale": 100.0,
-    "episode__max_formation_error": 100.0,
-    "episode__max_velocity_error": 40.0,
-    "episode__corridor_width": 200.0,
-}
 ENV_NAME = "uav_formation"
 MODULE_ID = "shared"
 

@@ -27,16 +27,7 @@ from torch import nn
 from torch.distributions import Normal
 
 from uav_formation_env.envs import resolve_with_overrides
-from uav_formation_env.episode import FormationEpisodes
-
-# The episode layer's training devices: log-compressed reward, divergence truncation, corridor.
-TRAINING_DEVICES: dict[str, Any] = {
-    "episode__reward": "log1p",
-    "episode__reward_scale": 100.0,
-    "episode__max_formation_error": 100.0,
-    "episode__max_velocity_error": 40.0,
-    "episode__corridor_width": 200.0,
-}
+from uav_formation_env.episode import TRAINING_DEVICES, FormationEpisodes
 
 
 def layer_init(layer: nn.Linear, std: float = np.sqrt(2), bias: float = 0.0) -> nn.Linear:

@@ -26,15 +26,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor
 
 from uav_formation_env import vec_env
-
-# The episode layer's training devices: log-compressed reward, divergence truncation, corridor.
-TRAINING_DEVICES: dict[str, Any] = {
-    "episode__reward": "log1p",
-    "episode__reward_scale": 100.0,
-    "episode__max_formation_error": 100.0,
-    "episode__max_velocity_error": 40.0,
-    "episode__corridor_width": 200.0,
-}
+from uav_formation_env.episode import TRAINING_DEVICES
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:

@@ -35,15 +35,8 @@ from torchrl.modules import MultiAgentMLP, ProbabilisticActor, TanhNormal
 from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
 from uav_formation_env import parallel_env
+from uav_formation_env.episode import TRAINING_DEVICES
 
-# The episode layer's training devices: log-compressed reward, divergence truncation, corridor.
-TRAINING_DEVICES: dict[str, Any] = {
-    "episode__reward": "log1p",
-    "episode__reward_scale": 100.0,
-    "episode__max_formation_error": 100.0,
-    "episode__max_velocity_error": 40.0,
-    "episode__corridor_width": 200.0,
-}
 GROUP = "uav"  # the group TorchRL infers from the agent names uav_0..uav_4
 
 

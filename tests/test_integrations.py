@@ -20,13 +20,6 @@ from uav_formation_env import parallel_env
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
-TRAINING_DEVICES = {
-    "episode__reward": "log1p",
-    "episode__reward_scale": 100.0,
-    "episode__max_formation_error": 100.0,
-    "episode__max_velocity_error": 40.0,
-    "episode__corridor_width": 200.0,
-}
 # the per-step reward with the devices is -log(1 + J / 100): J up to ~1e12 gives ~23 per UAV-step
 MAX_STEP_REWARD = 30.0
 
