@@ -17,19 +17,14 @@ from uav_formation_env.config import (
     ObstacleConfig,
     Scenario,
 )
+from uav_formation_env.formations import formation_offsets
 
 
-def v_offsets(n_uav: int, back: float = 10.0, side: float = 20.0) -> tuple[tuple[float, ...], ...]:
-    """V formation pointing +x: apex at 0, then pairs k = 1, 2, … at (-back k, ±side k).
-
-    For N = 5 this is the paper's z^d (eq. 22).
-    """
-    rows = [(0.0,) * 6]
-    for i in range(1, n_uav):
-        k = (i + 1) // 2
-        sign = 1.0 if i % 2 == 1 else -1.0
-        rows.append((-back * k, sign * side * k, 0.0, 0.0, 0.0, 0.0))
-    return tuple(rows)
+def v_offsets(n_uav: int, spacing: float = 10.0) -> tuple[tuple[float, ...], ...]:
+    """V formation pointing +x (:func:`~uav_formation_env.formations.formation_offsets`):
+    apex at 0, then pairs k = 1, 2, … at (-spacing k, ±2 spacing k); for N = 5 and the default
+    spacing this is the paper's z^d (eq. 22)."""
+    return tuple(tuple(row) for row in formation_offsets("v", n_uav, spacing).tolist())
 
 
 def leader_chain_adjacency(n_uav: int) -> tuple[tuple[int, ...], ...]:
