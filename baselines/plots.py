@@ -86,6 +86,11 @@ def learning_curve(
         ax.grid(True, which="both", alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=8)
+    return _save(fig, png)
+
+
+def _save(fig, png: str | Path) -> Path:
+    """Write ``fig`` to ``png`` (its folder created) and close it."""
     fig.tight_layout()
     png = Path(png)
     png.parent.mkdir(parents=True, exist_ok=True)
@@ -140,9 +145,4 @@ def mission_bars(
         ax.set_xticks(x)
         ax.set_xticklabels(short, rotation=30, ha="right", fontsize=8)
         ax.grid(True, axis="y", which="both", alpha=0.3)
-    fig.tight_layout()
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
-    return png
+    return _save(fig, png)

@@ -44,28 +44,18 @@ RICH_INFO_TYPES = {
     "penalty": float,
     "t": float,
 }
+COST_TERMS = {"formation", "energy", "terminal", "velocity", "separation"}
+# numeric infos (the default): cost terms as flat keys, neighbours as an (N,) bool mask
 INFO_TYPES = {
-    "J": float,
-    "cost_formation": float,
-    "cost_energy": float,
-    "cost_terminal": float,
-    "cost_velocity": float,
-    "cost_separation": float,
-    "disturbance": np.ndarray,
-    "disturbance_estimate": np.ndarray,
-    "reference_velocity": np.ndarray,
-    "group": int,
-    "neighbours": np.ndarray,  # (N,) bool mask
-    "obstacle_distance": float,
-    "min_separation": float,
-    "collision": bool,
-    "position": np.ndarray,
-    "velocity": np.ndarray,
-    "penalty": float,
-    "t": float,
+    **{
+        key: kind
+        for key, kind in RICH_INFO_TYPES.items()
+        if key not in ("cost_terms", "neighbours")
+    },
+    **{f"cost_{term}": float for term in COST_TERMS},
+    "neighbours": np.ndarray,
 }
 VECTOR_INFOS = ("disturbance", "disturbance_estimate", "reference_velocity", "position", "velocity")
-COST_TERMS = {"formation", "energy", "terminal", "velocity", "separation"}
 
 # (n_uav, obstacles, observer, collision_mode): observer on/off, obstacles none/paper/random,
 # collision none/penalty/terminate and N = 3, 5, 8 all appear.
