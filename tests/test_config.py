@@ -498,3 +498,34 @@ def test_resolve_scenario(tmp_path: Path) -> None:
     txt.write_text("duration: 10.0\n", encoding="utf-8")
     with pytest.raises(ValueError, match="unknown scenario"):
         resolve_scenario(txt)
+
+
+# ------------------------------------------------------------------------------------------------
+# scene section (uav_formation_env.scenes; more in tests/test_scenes.py)
+# ------------------------------------------------------------------------------------------------
+
+
+def test_optional_sections_convert_or_stay_none() -> None:
+    from uav_formation_env.config import ObstacleFieldConfig, SceneConfig
+
+    assert scenario_from_dict({"scene": None}).scene is None
+    s = scenario_from_dict(
+        {"scene": {"n_uav": [3, 4], "shapes": ["v", "grid"], "obstacles": {"count": [0, 2]}}}
+    )
+    # the mapping became its dataclass, the lists tuples of the hinted types
+    assert s.scene == SceneConfig(
+        n_uav=(3, 4), shapes=("v", "grid"), obstacles=ObstacleFieldConfig(count=(0, 2))
+    )
+    assert isinstance(s.scene.obstacles.radius[0], float)
+    with pytest.raises(ValueError, match=r"'scene\.spacing'.*expected 2 entries"):
+        scenario_from_dict({"scene": {"spacing": [1.0, 2.0, 3.0]}})
+    with pytest.raises(ValueError, match=r"'scene\.obstacles'.*expected a mapping"):
+        scenario_from_dict({"scene": {"obstacles": 3}})
+
+
+@pytest.mark.parametrize("name", sorted(SCENARIOS))
+def test_registered_scenarios_build_and_round_trip(name: str, tmp_path: Path) -> None:
+    scenario = resolve_scenario(name)
+    path = tmp_path / f"{name}.yaml"
+    save_scenario(scenario, path)
+    assert load_scenario(path) == scenario

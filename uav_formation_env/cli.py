@@ -176,7 +176,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     write_json(summary, out / "summary.json")
     plot_trajectories(
         batch.z[:, 0, :, :3],
-        scenario,
+        scenario if batch.scenes is None else batch.scenes[0],  # the first seed's drawn scene
         out / "trajectories.png",
         title=f"{args.policy}, observer {'on' if scenario.observer.enabled else 'off'}, "
         f"seed {seeds[0]}",

@@ -434,6 +434,44 @@ class CollisionConfig:
         _non_negative(self.penalty, "collision.penalty")
 
 
+OBSERVATION_KINDS = ("full", "local")
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """What each agent's observation vector holds (docs/model.md §5 and
+    :mod:`uav_formation_env.core.local_observation`).
+
+    - ``"full"``: the paper-era layout of :mod:`uav_formation_env.core.observation`, a slot block
+      per other UAV (19 + 7 (N - 1) values): exactly what the reference DMPC decodes, and what
+      Table 2 is reproduced with.
+    - ``"local"``: independent of N (19 + 11 k + 5 m values): the agent's own features, its
+      ``neighbours`` nearest graph neighbours (then the nearest other sensed UAVs) and its
+      ``obstacles`` nearest obstacles, each slot with a presence mask, so that one shared policy
+      flies any N and any field. k = 4 is the paper graph's largest in-degree (at N = 5 every
+      other UAV has a slot) and the k of the k-nearest swarm graphs; m = 2 holds the obstacle
+      being avoided and the next one.
+    """
+
+    kind: str = "full"  # "full" or "local"
+    neighbours: int = 4  # k, neighbour slots of the local layout [-]
+    obstacles: int = 2  # m, obstacle slots of the local layout [-]
+
+    def __post_init__(self) -> None:
+        _require(
+            self.kind in OBSERVATION_KINDS,
+            "observation.kind",
+            f"must be one of {OBSERVATION_KINDS}, got {self.kind!r}",
+        )
+        for name in ("neighbours", "obstacles"):
+            value = getattr(self, name)
+            _require(
+                isinstance(value, int) and not isinstance(value, bool) and value >= 1,
+                f"observation.{name}",
+                f"must be an integer >= 1, got {value!r}",
+            )
+
+
 REWARD_TRANSFORMS = ("raw", "scaled", "log1p")
 START_MODES = ("zero", "random", "staggered")
 START_CONTROLLERS = ("heuristic",)
@@ -497,9 +535,260 @@ class EpisodeConfig:
         )
 
 
+# the names of formations.SHAPES: config imports no other module of the package (the lowest
+# layer), so the list is repeated here; tests/test_scenes.py keeps the two equal
+FORMATION_SHAPES = ("v", "line_abreast", "column", "wedge", "grid", "circle")
+
+
+def _as_tuple(owner: object, name: str, field_name: str) -> tuple:
+    """The field ``name`` of a frozen dataclass as a tuple (lists accepted, so that the config
+    stays hashable), or a ValueError naming it."""
+    value = getattr(owner, name)
+    _require(
+        isinstance(value, tuple | list),
+        field_name,
+        f"must be a sequence, got {value!r}",
+    )
+    value = tuple(value)
+    object.__setattr__(owner, name, value)
+    return value
+
+
+def _range(owner: object, name: str, field_name: str, kind: type = float) -> tuple:
+    """Validate an inclusive range ``(low, high)``: two finite numbers (integers when ``kind`` is
+    int), low <= high. Returns it as a tuple."""
+    value = _as_tuple(owner, name, field_name)
+    _require(len(value) == 2, field_name, f"must be a (low, high) pair, got {value!r}")
+    for bound in value:
+        if kind is int:
+            _require(
+                isinstance(bound, int | np.integer) and not isinstance(bound, bool),
+                field_name,
+                f"bounds must be integers, got {value!r}",
+            )
+        else:
+            _require(
+                isinstance(bound, int | float | np.number) and not isinstance(bound, bool),
+                field_name,
+                f"bounds must be numbers, got {value!r}",
+            )
+            _finite(float(bound), field_name)
+    _require(value[0] <= value[1], field_name, f"needs low <= high, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class ObstacleFieldConfig:
+    """A random obstacle field, drawn along the preset route (:func:`uav_formation_env.scenes.
+    draw_scene`).
+
+    Each obstacle's centre is the route point at arc length ``along`` x (route length), moved
+    ``across`` metres perpendicular to that leg (positive: to the left of the direction of
+    flight). Placements whose detection circles (radius + ``avoidance.detection_margin``) come
+    closer than ``min_gap`` to another's, or whose centre lies within ``clear_start`` of the
+    route start, are redrawn: every drawn field satisfies :class:`AvoidanceConfig`'s rule.
+    """
+
+    count: tuple[int, int] = (1, 4)  # number of obstacles, inclusive range [-]
+    radius: tuple[float, float] = (15.0, 35.0)  # obstacle radius [m]
+    along: tuple[float, float] = (0.1, 0.9)  # centre along the route, fraction of its length [-]
+    across: tuple[float, float] = (-40.0, 40.0)  # lateral offset of the centre from the route [m]
+    min_gap: float = 0.0  # extra clearance between two obstacles' detection circles [m]
+    # probability that an obstacle is centred near a turn of the route (arc length within its
+    # detection distance of the turn), so that avoidance and turning overlap; an obstacle that
+    # finds no room near a turn goes anywhere along the route [-]
+    near_turns: float = 0.0
+    clear_start: float = 150.0  # no obstacle centre within this distance of the route start [m]
+
+    def __post_init__(self) -> None:
+        count = _range(self, "count", "scene.obstacles.count", int)
+        _require(count[0] >= 0, "scene.obstacles.count", f"must be >= 0, got {count!r}")
+        radius = _range(self, "radius", "scene.obstacles.radius")
+        _require(radius[0] > 0, "scene.obstacles.radius", f"must be > 0, got {radius!r}")
+        along = _range(self, "along", "scene.obstacles.along")
+        _require(
+            along[0] >= 0.0 and along[1] <= 1.0,
+            "scene.obstacles.along",
+            f"must lie in [0, 1] (fractions of the route length), got {along!r}",
+        )
+        _range(self, "across", "scene.obstacles.across")
+        _non_negative(self.min_gap, "scene.obstacles.min_gap")
+        _finite(self.near_turns, "scene.obstacles.near_turns")
+        _require(
+            0.0 <= self.near_turns <= 1.0,
+            "scene.obstacles.near_turns",
+            f"is a probability, must lie in [0, 1], got {self.near_turns!r}",
+        )
+        _non_negative(self.clear_start, "scene.obstacles.clear_start")
+
+
+@dataclass(frozen=True)
+class RouteConfig:
+    """A random preset route: ``legs`` straight legs flown at one speed, each turning by ``turn``
+    from the last. The legs' durations are drawn from ``leg_duration`` and then scaled together
+    so that they fill ``Scenario.duration`` exactly (only their ratios survive). Velocities are
+    horizontal; the first leg's is also the initial velocity.
+    """
+
+    legs: tuple[int, int] = (2, 5)  # number of legs, inclusive range [-]
+    heading: tuple[float, float] = (0.0, 0.0)  # first leg's heading, anticlockwise from +x [deg]
+    turn: tuple[float, float] = (-90.0, 90.0)  # heading change from one leg to the next [deg]
+    leg_duration: tuple[float, float] = (30.0, 70.0)  # before scaling to the duration [s]
+    speed: tuple[float, float] = (20.0, 20.0)  # one speed for the whole route [m/s]
+
+    def __post_init__(self) -> None:
+        legs = _range(self, "legs", "scene.route.legs", int)
+        _require(legs[0] >= 1, "scene.route.legs", f"must be >= 1, got {legs!r}")
+        _range(self, "heading", "scene.route.heading")
+        _range(self, "turn", "scene.route.turn")
+        leg_duration = _range(self, "leg_duration", "scene.route.leg_duration")
+        _require(
+            leg_duration[0] > 0,
+            "scene.route.leg_duration",
+            f"must be > 0, got {leg_duration!r}",
+        )
+        speed = _range(self, "speed", "scene.route.speed")
+        _require(speed[0] > 0, "scene.route.speed", f"must be > 0, got {speed!r}")
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """What changes from one reset to the next (:func:`uav_formation_env.scenes.draw_scene`).
+
+    The scenario holding it is the *template*; a scene draws a concrete scenario from it. Every
+    range is inclusive and drawn uniformly; ``None`` keeps the template's value.
+
+    - ``n_uav``: N. With ``shapes`` None the formation is the template's first N slots (so the
+      template must have at least the largest N), with a k-nearest graph unless N is the
+      template's own.
+    - ``shapes``: a shape of :data:`FORMATION_SHAPES` drawn uniformly (list one twice to weigh
+      it), at a ``spacing`` [m] drawn from its range, with a ``neighbours``-nearest graph.
+    - ``obstacles``: an :class:`ObstacleFieldConfig` along the (drawn) route.
+    - ``wind``: a horizontal constant wind of magnitude in the range, direction uniform [m/s^2];
+      ``gust_std``: the gust std [m/s^2]; ``amplitude``: eq. 21's amplitude [m/s^2].
+    - ``route``: a :class:`RouteConfig` replacing the preset schedule.
+    """
+
+    n_uav: tuple[int, int] | None = None  # number of UAVs N, inclusive range [-]
+    shapes: tuple[str, ...] | None = None  # formation shapes, one drawn uniformly
+    spacing: tuple[float, float] = (10.0, 10.0)  # spacing of a drawn shape [m]
+    neighbours: int = 4  # k of the k-nearest communication graph of a drawn formation [-]
+    obstacles: ObstacleFieldConfig | None = None  # random obstacle field
+    wind: tuple[float, float] | None = None  # horizontal wind magnitude [m/s^2]
+    gust_std: tuple[float, float] | None = None  # gust std per axis [m/s^2]
+    amplitude: tuple[float, float] | None = None  # eq. 21 amplitude [m/s^2]
+    route: RouteConfig | None = None  # random preset route
+
+    def __post_init__(self) -> None:
+        if self.n_uav is not None:
+            n_uav = _range(self, "n_uav", "scene.n_uav", int)
+            _require(n_uav[0] >= 2, "scene.n_uav", f"needs at least 2 UAVs, got {n_uav!r}")
+        if self.shapes is not None:
+            shapes = _as_tuple(self, "shapes", "scene.shapes")
+            _require(len(shapes) > 0, "scene.shapes", "must name at least one shape")
+            for shape in shapes:
+                _require(
+                    shape in FORMATION_SHAPES,
+                    "scene.shapes",
+                    f"must be in {FORMATION_SHAPES}, got {shape!r}",
+                )
+        spacing = _range(self, "spacing", "scene.spacing")
+        _require(spacing[0] > 0, "scene.spacing", f"must be > 0, got {spacing!r}")
+        _require(
+            isinstance(self.neighbours, int | np.integer)
+            and not isinstance(self.neighbours, bool)
+            and self.neighbours >= 1,
+            "scene.neighbours",
+            f"must be an integer >= 1, got {self.neighbours!r}",
+        )
+        for name in ("wind", "gust_std", "amplitude"):
+            if getattr(self, name) is not None:
+                bounds = _range(self, name, f"scene.{name}")
+                _require(bounds[0] >= 0, f"scene.{name}", f"must be >= 0, got {bounds!r}")
+        _require(
+            self.obstacles is None or isinstance(self.obstacles, ObstacleFieldConfig),
+            "scene.obstacles",
+            f"must be an ObstacleFieldConfig or None, got {self.obstacles!r}",
+        )
+        _require(
+            self.route is None or isinstance(self.route, RouteConfig),
+            "scene.route",
+            f"must be a RouteConfig or None, got {self.route!r}",
+        )
+
+
+def _route_extent(schedule: ScheduleConfig, duration: float) -> tuple[float, int]:
+    """Horizontal length [m] of the preset route over [0, duration] and its number of legs."""
+    starts = (0.0, *schedule.times)
+    ends = (*schedule.times, math.inf)
+    length, legs = 0.0, 0
+    for start, end, velocity in zip(starts, ends, schedule.velocities):
+        flown = min(end, duration) - max(start, 0.0)
+        if flown > 0:
+            length += math.hypot(velocity[0], velocity[1]) * flown
+            legs += 1
+    return length, legs
+
+
+def _check_scene(scenario: Scenario) -> None:
+    """The draw-time impossibilities of ``scenario.scene`` that its template already shows."""
+    scene = scenario.scene
+    if scene is None:
+        return
+    _require(
+        isinstance(scene, SceneConfig),
+        "scene",
+        f"must be a SceneConfig or None, got {scene!r}",
+    )
+    if scene.n_uav is not None and scene.shapes is None:
+        _require(
+            scene.n_uav[1] <= scenario.n_uav,
+            "scene.n_uav",
+            f"without scene.shapes the formation is the template's first N slots, but the "
+            f"template has {scenario.n_uav} UAVs < {scene.n_uav[1]}; give scene.shapes",
+        )
+    field_ = scene.obstacles
+    if field_ is None:
+        return
+    if scene.route is None:
+        length, legs = _route_extent(scenario.schedule, scenario.duration)
+    else:  # the longest route any draw gives
+        length, legs = scene.route.speed[1] * scenario.duration, scene.route.legs[1]
+    _require(
+        length > 0 or field_.count[1] == 0,
+        "scene.obstacles",
+        "the preset route has zero length: no obstacle can be placed along it",
+    )
+    farthest = field_.along[1] * length + max(abs(a) for a in field_.across)
+    _require(
+        field_.count[1] == 0 or farthest >= field_.clear_start,
+        "scene.obstacles.clear_start",
+        f"no centre can be {field_.clear_start} m from the route start: the farthest "
+        f"is {farthest:.1f} m",
+    )
+    # Centres are pairwise >= d apart, so discs of radius d/2 around them are disjoint and lie
+    # within d/2 of the region the centres are drawn in: one rectangle (leg part x across
+    # width) per leg. More obstacles than those grown rectangles hold discs can never be placed.
+    d = 2 * (field_.radius[0] + scenario.avoidance.detection_margin) + field_.min_gap
+    span = (field_.along[1] - field_.along[0]) * length
+    width = field_.across[1] - field_.across[0]
+    room = (span + legs * d) * (width + d) / (math.pi * d * d / 4)
+    _require(
+        field_.count[1] <= room,
+        "scene.obstacles.count",
+        f"at most {math.floor(room)} obstacles fit along the route with non-overlapping "
+        f"detection circles, but up to {field_.count[1]} are asked for",
+    )
+
+
 @dataclass(frozen=True)
 class Scenario:
-    """A whole scenario. The defaults are the paper's (docs/model.md §8)."""
+    """A whole scenario. The defaults are the paper's (docs/model.md §8).
+
+    With a ``scene`` (:class:`SceneConfig`) the scenario is a *template*:
+    :func:`uav_formation_env.scenes.draw_scene` draws a concrete scenario from it (``scene``
+    None) at each reset, and validation here also rejects scenes the template cannot hold.
+    """
 
     name: str = "paper"
     duration: float = 200.0  # episode length [s]
@@ -514,6 +803,9 @@ class Scenario:
     collision: CollisionConfig = field(default_factory=CollisionConfig)
     mission: MissionConfig = field(default_factory=MissionConfig)
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    # what a reset draws anew (uav_formation_env.scenes.draw_scene); None: a concrete scenario
+    scene: SceneConfig | None = None
 
     def __post_init__(self) -> None:
         _positive(self.duration, "duration")
@@ -532,10 +824,11 @@ class Scenario:
             f"must be a positive whole number of steps dynamics.dt={self.dynamics.dt}, "
             f"got {self.duration}",
         )
+        _check_scene(self)
 
     @property
     def n_uav(self) -> int:
-        """Number of UAVs N."""
+        """Number of UAVs N (the template's, for a scenario with a scene)."""
         return self.formation.n_uav
 
     @property

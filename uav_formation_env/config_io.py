@@ -17,7 +17,13 @@ from typing import Any, Union
 import yaml
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.scenarios import make_scenario, windy_scenario
+from uav_formation_env.scenarios import (
+    make_scenario,
+    random_fields_scenario,
+    random_swarm_scenario,
+    swarm_scenario,
+    windy_scenario,
+)
 
 _T = typing.TypeVar("_T")
 
@@ -62,6 +68,14 @@ def _convert(value: Any, hint: Any, path: str) -> Any:
             )
         return tuple(_convert(item, arg, path) for item, arg in zip(value, args))
     if origin in (Union, types.UnionType):
+        # "X | None" (the optional sections and ranges of Scenario.scene): None stays None, any
+        # other value is converted (and checked) as an X, so a nested mapping becomes its
+        # dataclass and its unknown keys are named
+        args = [arg for arg in typing.get_args(hint) if arg is not type(None)]
+        if value is None and len(args) < len(typing.get_args(hint)):
+            return None
+        if len(args) == 1:
+            return _convert(value, args[0], path)
         return value
     if hint is bool:
         if not isinstance(value, bool):
@@ -188,6 +202,13 @@ SCENARIOS: dict[str, typing.Callable[[], Scenario]] = {
     "random_obstacles": lambda: make_scenario(obstacles="random", seed=0),
     "n3": lambda: make_scenario(n_uav=3),
     "n8": lambda: make_scenario(n_uav=8),
+    # templates: a scene drawn per reset (uav_formation_env.scenes.draw_scene)
+    "random_fields": random_fields_scenario,
+    "random_swarm": random_swarm_scenario,
+    # large swarms, concrete
+    "swarm_20": lambda: swarm_scenario(20),
+    "swarm_50": lambda: swarm_scenario(50),
+    "swarm_100": lambda: swarm_scenario(100),
 }
 
 

@@ -44,13 +44,18 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.cost import anchored
+from uav_formation_env.core.local_observation import (
+    build_local_observations,
+    observation_bounds,
+    observation_size,
+)
 from uav_formation_env.core.observation import (
     DISTANCE_SCALE,
     ESTIMATE_SCALE,
     VELOCITY_SCALE,
     build_observations,
 )
-from uav_formation_env.core.reference import route_error
+from uav_formation_env.core.reference import next_leg, route_error
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.sim import FormationSim, SeedLike, StepResult
 
@@ -60,6 +65,8 @@ __all__ = [
     "FormationEpisodes",
     "StepResult",
     "global_state",
+    "observation_bounds",
+    "observation_size",
     "observations_of",
     "validate_action",
     "validate_actions",
@@ -126,6 +133,35 @@ def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
 def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
     """(B, N, dim) float32 observations of a sim step, the one place they are encoded."""
     scenario = sim.scenario
+    config = scenario.observation
+    if config.kind == "local":
+        present = (
+            np.ones((sim.batch_size, sim.obstacle_radii.shape[-1]), dtype=bool)
+            if sim.obstacles is None
+            else sim.obstacles.present
+        )
+        centres = sim.obstacle_centers if sim.obstacles is None else sim.obstacles.centres
+        radii = sim.obstacle_radii if sim.obstacles is None else sim.obstacles.radii
+        batch = sim.batch_size
+        next_velocity, wait = next_leg(scenario.schedule, result.t)
+        return build_local_observations(
+            result.z,
+            result.reference_velocity,
+            result.estimate,
+            result.adjacency,
+            result.avoiding,
+            result.t / scenario.duration,
+            sim.offsets,
+            np.broadcast_to(centres, (batch, *centres.shape[-2:])),
+            np.broadcast_to(radii, (batch, radii.shape[-1])),
+            present,
+            result.min_separation,
+            k=config.neighbours,
+            m=config.obstacles,
+            mirrored=scenario.formation.mirrored_offsets,
+            next_velocity=next_velocity,
+            time_to_switch=wait,
+        ).obs
     return build_observations(
         result.z,
         result.reference_velocity,
@@ -138,6 +174,7 @@ def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
         sim.obstacle_radii,
         result.min_separation,
         scenario.formation.mirrored_offsets,
+        None if sim.obstacles is None else sim.obstacles.present,
     )
 
 
@@ -204,6 +241,8 @@ class FormationEpisodes:
         autoreset: reset a copy as soon as its episode ends (vectorised training views).
         fly_on_after_collision: do not end episodes on collisions in ``"terminate"`` mode
             (evaluation flies every seed to its end and counts the collisions).
+        n_uav: N of a scene distribution that draws N per reset (see
+            :class:`~uav_formation_env.sim.FormationSim`).
     """
 
     def __init__(
@@ -213,11 +252,12 @@ class FormationEpisodes:
         *,
         autoreset: bool = False,
         fly_on_after_collision: bool = False,
+        n_uav: int | None = None,
     ) -> None:
         self.scenario = scenario
-        self.sim = FormationSim(scenario, batch_size=batch_size)
+        self.sim = FormationSim(scenario, batch_size=batch_size, n_uav=n_uav)
         self.batch_size = self.sim.batch_size
-        self.n_uav = scenario.n_uav
+        self.n_uav = self.sim.n_uav
         self.u_max = scenario.dynamics.u_max
         self.autoreset = bool(autoreset)
         self.fly_on_after_collision = bool(fly_on_after_collision)
@@ -345,8 +385,8 @@ class FormationEpisodes:
         controller (in a second simulator, so that the other copies do not move), then adopt
         it. Returns the simulator's :class:`StepResult` after the adoption."""
         if self._flight is None:
-            self._flight = FormationSim(self.scenario, self.batch_size)
-            self._flight.reset()
+            self._flight = FormationSim(self.scenario, self.batch_size, n_uav=self.n_uav)
+            self._flight.adopt(np.ones(self.batch_size, dtype=bool), self.sim)
         flight, cfg = self._flight, self.scenario
         pending = starts > 0
         flight.adopt(pending, self.sim)
@@ -357,7 +397,7 @@ class FormationEpisodes:
                 flight.z,
                 last.reference_velocity,
                 last.adjacency,
-                self.sim.offsets,
+                flight.offsets,
                 self.u_max,
                 mirrored=cfg.formation.mirrored_offsets,
             )

@@ -1,23 +1,48 @@
-"""Scenario builders: the paper's, other formation sizes, obstacle fields, wind.
+"""Scenario builders: the paper's, other formation sizes, obstacle fields, wind, swarms.
 
 Formation shapes and obstacle fields are data: every builder returns a validated
 :class:`~uav_formation_env.config.Scenario`. Random obstacle fields draw from a passed
 ``np.random.Generator``.
+
+Named scenarios of this module (registered in :data:`uav_formation_env.config_io.SCENARIOS`):
+
+- ``random_fields`` (:func:`random_fields_scenario`): the paper's scenario (N = 5, its V and
+  graph, its route and disturbance) with a new obstacle field each reset: 1 to 4 obstacles of
+  radius 15-35 m centred along 10-90 % of the route, at most the V's half-width (40 m) to either
+  side of it, so the preset route always passes within their detection distance and the
+  formation has to avoid each of them.
+- ``random_swarm`` (:func:`random_swarm_scenario`): each reset draws N in 3..10, a shape of
+  :data:`~uav_formation_env.formations.SHAPES` (10 m spacing, 4-nearest graph), a field like
+  ``random_fields``'s, a constant horizontal wind of 0-0.3 m/s² in a uniform direction and
+  gusts of std 0-0.1 m/s²; the paper's route.
+- ``swarm_20``, ``swarm_50``, ``swarm_100`` (:func:`swarm_scenario`): concrete scenarios with N
+  UAVs in a 10 m grid (a V of 100 would be 1 km wide) and a 4-nearest graph, a start box grown
+  to about (3 min_spacing)² per UAV, and the paper's two obstacles on the paper's route with
+  their radii scaled from 30 m by the grid's half-width over the V's 40 m (at least 15 m).
+
+The templates (a :class:`~uav_formation_env.config.SceneConfig` in ``scene``) are concrete
+until drawn: :func:`uav_formation_env.scenes.draw_scene` gives the scenario of one reset.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
 
 from uav_formation_env.config import (
+    PAPER_OBSTACLES,
     DisturbanceConfig,
     FormationConfig,
+    InitialStateConfig,
+    ObservationConfig,
     ObstacleConfig,
+    ObstacleFieldConfig,
     Scenario,
+    SceneConfig,
 )
-from uav_formation_env.formations import formation_offsets
+from uav_formation_env.formations import SHAPES, formation_offsets, k_nearest_adjacency
 
 
 def v_offsets(n_uav: int, spacing: float = 10.0) -> tuple[tuple[float, ...], ...]:
@@ -124,10 +149,110 @@ def windy_scenario() -> Scenario:
     return replace(make_scenario(wind=(0.0, 0.3, 0.0), gust_std=0.1), name="windy")
 
 
+def start_box_for(initial: InitialStateConfig, n_uav: int) -> InitialStateConfig:
+    """``initial`` with its start box grown, about its centre, to hold ``n_uav`` UAVs easily.
+
+    The box gets at least (3 min_spacing)² of horizontal area per UAV, so that the rejection
+    sampling of :func:`uav_formation_env.core.initial.initial_positions` (which redraws UAVs
+    closer than min_spacing) ends within a few rounds; a box that already has it is kept as it
+    is. Both horizontal extents grow by the same factor (a flat extent takes the other's size).
+    """
+    need = n_uav * (3.0 * initial.min_spacing) ** 2  # [m^2]
+    low, high = initial.position_low, initial.position_high
+    ex, ey = high[0] - low[0], high[1] - low[1]
+    if ex * ey >= need:
+        return initial
+    if ex > 0 and ey > 0:
+        grow = math.sqrt(need / (ex * ey))
+        ex, ey = ex * grow, ey * grow
+    elif ex > 0:  # a flat box: the flat side opens up to the area needed
+        ey = need / ex
+    elif ey > 0:
+        ex = need / ey
+    else:
+        ex = ey = math.sqrt(need)
+    # half-extents rounded up to 0.1 m: tidy numbers in YAML, and never below the area needed
+    hx, hy = math.ceil(ex * 5.0) / 10.0, math.ceil(ey * 5.0) / 10.0
+    cx, cy = (low[0] + high[0]) / 2, (low[1] + high[1]) / 2
+    return replace(
+        initial,
+        # rounded: -3.8 rather than -3.8000000000000007 in YAML
+        position_low=(round(cx - hx, 6), round(cy - hy, 6), low[2]),
+        position_high=(round(cx + hx, 6), round(cy + hy, 6), high[2]),
+    )
+
+
+def shape_formation(
+    shape: str, n_uav: int, spacing: float = 10.0, neighbours: int = 4
+) -> FormationConfig:
+    """A named shape (:func:`~uav_formation_env.formations.formation_offsets`, spacing [m])
+    with a ``neighbours``-nearest communication graph
+    (:func:`~uav_formation_env.formations.k_nearest_adjacency`)."""
+    offsets = formation_offsets(shape, n_uav, spacing)
+    adjacency = k_nearest_adjacency(offsets, neighbours)
+    return FormationConfig(
+        tuple(tuple(row) for row in offsets.tolist()),
+        tuple(tuple(row) for row in adjacency.tolist()),
+    )
+
+
+def random_fields_scenario() -> Scenario:
+    """The paper's scenario with a random obstacle field drawn each reset (module docstring)."""
+    base = Scenario()
+    # the V's half-width: obstacles at most this far to the side still cross the formation
+    half_width = max(abs(row[1]) for row in base.formation.offsets)
+    field = ObstacleFieldConfig(count=(1, 4), across=(-half_width, half_width))
+    return replace(base, name="random_fields", scene=SceneConfig(obstacles=field))
+
+
+def random_swarm_scenario() -> Scenario:
+    """N, shape, obstacle field, wind and gusts drawn each reset (module docstring)."""
+    scene = SceneConfig(
+        n_uav=(3, 10),
+        shapes=SHAPES,
+        obstacles=ObstacleFieldConfig(count=(1, 4)),
+        wind=(0.0, 0.3),
+        gust_std=(0.0, 0.1),
+    )
+    # N varies, so only the N-independent observation gives one space for every reset
+    return replace(
+        Scenario(), name="random_swarm", scene=scene, observation=ObservationConfig(kind="local")
+    )
+
+
+def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Scenario:
+    """N UAVs in a compact shape on the paper's route and obstacles (module docstring).
+
+    Args:
+        n_uav: N >= 2.
+        shape: one of :data:`~uav_formation_env.formations.SHAPES`.
+        spacing: the formation's spacing [m].
+    """
+    base = Scenario()
+    formation = shape_formation(shape, n_uav, spacing)
+    across = [row[1] for row in formation.offsets]
+    half_width = (max(across) - min(across)) / 2  # [m]
+    # the paper's 30 m obstacles against its V of half-width 40 m, scaled to this formation
+    radius = max(15.0, 30.0 * half_width / 40.0)
+    obstacles = tuple(ObstacleConfig(o.center, radius) for o in PAPER_OBSTACLES)
+    return replace(
+        base,
+        name=f"swarm_{n_uav}",
+        formation=formation,
+        initial=start_box_for(base.initial, n_uav),
+        avoidance=replace(base.avoidance, obstacles=obstacles),
+    )
+
+
 __all__ = [
     "leader_chain_adjacency",
     "make_scenario",
+    "random_fields_scenario",
     "random_obstacles",
+    "random_swarm_scenario",
+    "shape_formation",
+    "start_box_for",
+    "swarm_scenario",
     "v_offsets",
     "windy_scenario",
 ]

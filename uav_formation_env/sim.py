@@ -28,7 +28,7 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.core import topology
 from uav_formation_env.core.cost import CostTerms, stage_cost
 from uav_formation_env.core.cost.stage import pair_distances
-from uav_formation_env.core.disturbances import Disturbance
+from uav_formation_env.core.disturbances import CopyDisturbance, Disturbance
 from uav_formation_env.core.dynamics import zoh_step
 from uav_formation_env.core.initial import initial_positions
 from uav_formation_env.core.observer import (
@@ -38,6 +38,8 @@ from uav_formation_env.core.observer import (
     observer_init,
     observer_step_held,
 )
+from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
+from uav_formation_env.scenes import draw_scene, max_gust_std, max_obstacles, n_uav_range
 from uav_formation_env.seeding import check_seed
 
 NOISE_BLOCK = 100  # control steps of disturbance noise drawn per Generator call
@@ -93,32 +95,81 @@ def _where_batch(mask: np.ndarray, new, old):
     return replace(old, **out)
 
 
+def _scene_n_uav(scenario: Scenario, n_uav: int | None) -> int:
+    """The N of a simulator of ``scenario`` (see :class:`FormationSim`)."""
+    if scenario.scene is None:
+        if n_uav is not None and n_uav != scenario.n_uav:
+            raise ValueError(f"n_uav={n_uav!r} differs from the scenario's {scenario.n_uav} UAVs")
+        return scenario.n_uav
+    if scenario.scene.route is not None:
+        # every copy of a simulator follows one preset schedule today (topology, previews and
+        # the DMPC read it from the scenario); per-copy routes are drawn but not yet simulated
+        raise ValueError(
+            "scene.route: the simulator does not fly drawn routes yet; draw_scene() gives the "
+            "concrete scenario of a seed, which FormationSim can run"
+        )
+    low, high = n_uav_range(scenario)
+    if n_uav is None:
+        if low != high:
+            raise ValueError(
+                f"scenario {scenario.name!r} draws N per reset in {low}..{high}; a simulator has "
+                "one N: pass n_uav (resets whose seed draws another N are refused)"
+            )
+        return low
+    if not isinstance(n_uav, int | np.integer) or not low <= n_uav <= high:
+        raise ValueError(f"n_uav must be an integer in {low}..{high}, got {n_uav!r}")
+    return int(n_uav)
+
+
 class FormationSim:
     """B scenario copies stepped together.
+
+    A scenario with a scene distribution (``scenario.scene``) draws each copy's scene (formation,
+    graph, obstacles, disturbance, start box) at every reset from the copy's generator, before
+    the start positions: a seed names the scene and the episode, whatever the batch. The drawn
+    scenes are :attr:`scenes`; the per-copy arrays :attr:`offsets` (B, N, 6),
+    :attr:`base_adjacency` (B, N, N) and :attr:`obstacles` hold them for the batched core.
 
     Args:
         scenario: the validated scenario.
         batch_size: number of copies B.
+        n_uav: N of a distribution that draws N per reset (every copy of a simulator has the same
+            N; a reset whose seed draws another N raises ValueError and changes nothing).
     """
 
-    def __init__(self, scenario: Scenario, batch_size: int = 1) -> None:
+    def __init__(self, scenario: Scenario, batch_size: int = 1, n_uav: int | None = None) -> None:
         if not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
         self.scenario = scenario
         self.batch_size = int(batch_size)
-        self.n_uav = scenario.n_uav
+        self.n_uav = _scene_n_uav(scenario, n_uav)
         self.dt = scenario.dynamics.dt
         self.u_max = scenario.dynamics.u_max
-        self.offsets = np.asarray(scenario.formation.offsets, dtype=float)
-        self.base_adjacency = np.asarray(scenario.formation.adjacency, dtype=float)
-        self.obstacle_centers = np.array(
-            [o.center for o in scenario.avoidance.obstacles], dtype=float
-        ).reshape(-1, 2)
-        self.obstacle_radii = np.array([o.radius for o in scenario.avoidance.obstacles])
-        self.disturbance = Disturbance(scenario.disturbance, self.n_uav, self.dt)
+        B, N = self.batch_size, self.n_uav
+        self.scenes: list[Scenario] = [scenario] * B  # the concrete scenario of each copy
+        disturbance = scenario.disturbance
+        if scenario.scene is None:
+            self.offsets = np.asarray(scenario.formation.offsets, dtype=float)  # (N, 6)
+            self.base_adjacency = np.asarray(scenario.formation.adjacency, dtype=float)  # (N, N)
+            self.obstacles: ObstacleField | None = None  # the scenario's, in every copy
+            self.copy_disturbance: CopyDisturbance | None = None
+            self.obstacle_centers = np.array(
+                [o.center for o in scenario.avoidance.obstacles], dtype=float
+            ).reshape(-1, 2)
+            self.obstacle_radii = np.array([o.radius for o in scenario.avoidance.obstacles])
+        else:
+            self.offsets = np.zeros((B, N, 6))
+            self.base_adjacency = np.zeros((B, N, N))
+            avoidance = replace(scenario.avoidance, obstacles=())
+            self.obstacles = obstacle_field([avoidance] * B, max_obstacles(scenario))
+            self.obstacle_centers = self.obstacles.centres  # (B, O, 2), padding far away
+            self.obstacle_radii = self.obstacles.radii  # (B, O)
+            # the noise layout has gust columns whenever some draw may have gusts
+            disturbance = replace(disturbance, gust_std=max_gust_std(scenario))
+            self.copy_disturbance = CopyDisturbance.of(disturbance, B)
+        self.disturbance = Disturbance(disturbance, N, self.dt)
         self._rows = np.arange(self.batch_size)
         self._n_steps = scenario.n_steps
-        B, N = self.batch_size, self.n_uav
         # The state of every copy, declared here and (re)initialised per copy by reset().
         self._rngs = [np.random.default_rng() for _ in range(B)]  # per copy: disturbance noise
         self._seed_streams: list[np.random.Generator | None] = [None] * B  # follow-up seeds
@@ -130,7 +181,7 @@ class FormationSim:
         self.t = np.zeros(B)  # time since reset [s]
         self.steps = np.zeros(B, dtype=np.int64)  # control steps since reset
         self.observer: ObserverState = observer_init(self.z[..., 3:])
-        self.topology = topology.init_topology(B, N, len(self.obstacle_centers))
+        self.topology = topology.init_topology(B, N, self.obstacle_radii.shape[-1])
         self.last: StepResult | None = None  # None until the first reset
 
     # ------------------------------------------------------------------ reset
@@ -159,19 +210,33 @@ class FormationSim:
             raise ValueError(f"mask must have shape ({B},), got {mask.shape}")
         indices = np.flatnonzero(mask)
         seeds = _seeds_for(seed, len(indices))
-        low = np.asarray(cfg.initial.position_low)
-        high = np.asarray(cfg.initial.position_high)
+        # Draw every copy's scene first and commit only if all fit: a refused reset changes
+        # nothing (the follow-up seed streams are advanced on copies).
+        draws = []
         for b, s in zip(indices, seeds):
+            stream = self._seed_streams[b]
             if s is not None:
-                follow_up = np.random.SeedSequence(s).spawn(1)[0]
-                self._seed_streams[b] = np.random.default_rng(follow_up)
-            elif self._seed_streams[b] is not None:
-                s = int(self._seed_streams[b].integers(2**63))
+                stream = np.random.default_rng(np.random.SeedSequence(s).spawn(1)[0])
+            elif stream is not None:
+                stream = copy.deepcopy(stream)
+                s = int(stream.integers(2**63))
             rng = np.random.default_rng(s)
-            self._rngs[b] = rng
-            self.z[b, :, :3] = initial_positions(rng, N, low, high, cfg.initial.min_spacing)
-            self.z[b, :, 3:] = cfg.initial.velocity
-            self.gust[b] = self.disturbance.initial_gust(rng)
+            scene = draw_scene(cfg, rng)
+            if scene.n_uav != N:
+                raise ValueError(
+                    f"seed {s} draws a scene of {scene.n_uav} UAVs for copy {b}, but this "
+                    f"simulator has n_uav={N}"
+                )
+            draws.append((b, stream, rng, scene))
+        for b, stream, rng, scene in draws:
+            self._seed_streams[b], self._rngs[b], self.scenes[b] = stream, rng, scene
+            initial = scene.initial
+            low, high = np.asarray(initial.position_low), np.asarray(initial.position_high)
+            self.z[b, :, :3] = initial_positions(rng, N, low, high, initial.min_spacing)
+            self.z[b, :, 3:] = initial.velocity
+            if cfg.scene is not None:
+                self._set_scene(b, scene)
+            self.gust[b] = self.disturbance.initial_gust(rng, scene.disturbance.gust_std)
             self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)
         self.noise_pos[mask] = 0
         self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
@@ -185,6 +250,14 @@ class FormationSim:
             result = _where_batch(mask, result, self.last)
         self.last = result
         return result
+
+    def _set_scene(self, copy: int, scene: Scenario) -> None:
+        """Write a drawn scene into copy ``copy``'s per-copy arrays."""
+        self.offsets[copy] = scene.formation.offsets
+        self.base_adjacency[copy] = scene.formation.adjacency
+        assert self.obstacles is not None and self.copy_disturbance is not None
+        self.obstacles.set_copy(copy, scene.avoidance)
+        self.copy_disturbance.set_copy(copy, scene.disturbance)
 
     # ------------------------------------------------------------------ step
     def step(self, u_n: np.ndarray) -> StepResult:
@@ -211,7 +284,7 @@ class FormationSim:
         u_d = compensation(self.observer, obs_cfg) if obs_cfg.enabled else np.zeros_like(u_n)
         u = np.minimum(np.maximum(u_n + u_d, -u_max), u_max)
         noise = self.noise[self._rows, self.noise_pos]
-        d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust)
+        d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust, self.copy_disturbance)
         a = u + d
         if obs_cfg.enabled:
             self.observer = observer_step_held(
@@ -254,6 +327,7 @@ class FormationSim:
             cfg.avoidance,
             cfg.schedule,
             self.base_adjacency,
+            self.obstacles,
         )
         self.topology = (
             new_topology
@@ -313,20 +387,37 @@ class FormationSim:
             The :class:`StepResult` of every copy after the adoption.
         """
         mask = np.asarray(mask, dtype=bool)
-        if source.batch_size != self.batch_size or source.scenario != self.scenario:
-            raise ValueError("adopt needs a source simulator of the same scenario and batch size")
-        if source.last is None or self.last is None:
-            raise RuntimeError("both simulators must have been reset before adopt()")
+        if (
+            source.batch_size != self.batch_size
+            or source.n_uav != self.n_uav
+            or source.scenario != self.scenario
+        ):
+            raise ValueError("adopt needs a source simulator of the same scenario, N and B")
+        if source.last is None or (self.last is None and not mask.all()):
+            raise RuntimeError(
+                "adopt() needs a source that has been reset, and a reset target unless every "
+                "copy is adopted"
+            )
         for name in ("z", "gust", "noise", "noise_pos", "t", "steps"):
             getattr(self, name)[mask] = getattr(source, name)[mask]
+        if self.scenario.scene is not None:
+            assert self.obstacles is not None and source.obstacles is not None
+            self.offsets[mask] = source.offsets[mask]
+            self.base_adjacency[mask] = source.base_adjacency[mask]
+            self.obstacles.take(mask, source.obstacles)
+            for name in ("amplitude", "wind", "gust_std"):
+                getattr(self.copy_disturbance, name)[mask] = getattr(source.copy_disturbance, name)[
+                    mask
+                ]
         self.observer = _where_batch(mask, source.observer, self.observer)
         self.topology = _where_batch(mask, source.topology, self.topology)
         for b in np.flatnonzero(mask):
             # copies, not the objects: the source may go on drawing from its own
             self._rngs[b] = copy.deepcopy(source._rngs[b])
             self._seed_streams[b] = copy.deepcopy(source._seed_streams[b])
+            self.scenes[b] = source.scenes[b]
         self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
-        self.last = _where_batch(mask, source.last, self.last)
+        self.last = source.last if self.last is None else _where_batch(mask, source.last, self.last)
         return self.last
 
     def generator(self, copy: int) -> np.random.Generator:
@@ -346,11 +437,14 @@ class FormationSim:
         p = self.z[..., :3]
         if pair is None:
             pair = pair_distances(p)
-        if len(self.obstacle_radii) == 0:
+        if self.obstacle_radii.shape[-1] == 0:
             surface = np.full(p.shape[:2], np.inf)
-        else:
+        elif self.obstacles is None:
             centre = topology.obstacle_distances(p, self.scenario.avoidance)
             surface = np.minimum.reduce(centre - self.obstacle_radii, axis=-1)
+        else:  # padding obstacles are 1e9 m away: never the nearest of a UAV on its route
+            centre = topology.obstacle_distances(p, self.obstacles)
+            surface = np.minimum.reduce(centre - self.obstacles.radii[:, None], axis=-1)
         return np.minimum.reduce(pair, axis=-1), surface
 
     def reference_preview(self) -> np.ndarray:

@@ -18,6 +18,7 @@ single simulation seeded alike, bit for bit.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -56,6 +57,36 @@ def paper_sinusoid(t: np.ndarray, n_uav: int, amplitude: float, period: float) -
     return _signed_amplitude(n_uav, amplitude) * wave[..., None, :]
 
 
+@dataclass
+class CopyDisturbance:
+    """Per-copy disturbance parameters, for scene distributions that draw them per reset.
+
+    Attributes:
+        amplitude: (B, 1, 1) eq. 21 amplitude A [m/s^2].
+        wind: (B, 1, 3) constant wind [m/s^2].
+        gust_std: (B, 1, 1) stationary gust std σ [m/s^2].
+    """
+
+    amplitude: np.ndarray
+    wind: np.ndarray
+    gust_std: np.ndarray
+
+    @classmethod
+    def of(cls, config: DisturbanceConfig, batch: int) -> CopyDisturbance:
+        """Every copy with the parameters of ``config``."""
+        return cls(
+            amplitude=np.full((batch, 1, 1), config.amplitude),
+            wind=np.tile(np.asarray(config.wind, dtype=float), (batch, 1, 1)),
+            gust_std=np.full((batch, 1, 1), config.gust_std),
+        )
+
+    def set_copy(self, copy: int, config: DisturbanceConfig) -> None:
+        """Take copy ``copy``'s parameters from ``config``."""
+        self.amplitude[copy] = config.amplitude
+        self.wind[copy] = config.wind
+        self.gust_std[copy] = config.gust_std
+
+
 class Disturbance:
     """The configured disturbance model for N UAVs with control step ``dt``.
 
@@ -92,14 +123,25 @@ class Disturbance:
         normal = rng.standard_normal((*shape, self.gust_dim))
         return np.concatenate((uniform, normal), axis=-1)
 
-    def initial_gust(self, rng: np.random.Generator) -> np.ndarray:
-        """Gust state at t = 0 for one copy, (N, 3) [m/s^2], from the stationary law."""
+    def initial_gust(self, rng: np.random.Generator, gust_std: float | None = None) -> np.ndarray:
+        """Gust state at t = 0 for one copy, (N, 3) [m/s^2], from the stationary law.
+
+        Args:
+            rng: the copy's generator.
+            gust_std: the copy's σ (None: the configuration's); the normal draw is made whenever
+                the layout has gust noise, so that a seed's draws do not depend on σ.
+        """
         if self.gust_dim == 0:
             return np.zeros((self.n_uav, 3))
-        return self.config.gust_std * rng.standard_normal((self.n_uav, 3))
+        std = self.config.gust_std if gust_std is None else gust_std
+        return std * rng.standard_normal((self.n_uav, 3))
 
     def evaluate(
-        self, t: np.ndarray, noise: np.ndarray, gust: np.ndarray
+        self,
+        t: np.ndarray,
+        noise: np.ndarray,
+        gust: np.ndarray,
+        per_copy: CopyDisturbance | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Disturbance held over the step starting at ``t``, and the next gust state.
 
@@ -107,18 +149,26 @@ class Disturbance:
             t: (B,) step start time [s].
             noise: (B, N, noise_dim) this step's standard noise (from :meth:`draw_noise`).
             gust: (B, N, 3) current gust state [m/s^2].
+            per_copy: amplitude, wind and gust σ of each copy (None: the configuration's).
 
         Returns:
             ``(d, gust_next)``, each (B, N, 3) [m/s^2].
         """
         cfg = self.config
-        d = self._wind + gust  # a new array, so the sums below may run in place
+        wind = self._wind if per_copy is None else per_copy.wind
+        d = wind + gust  # a new array, so the sums below may run in place
         if cfg.model == "paper":
-            d += paper_sinusoid(t, self.n_uav, cfg.amplitude, cfg.period)
+            if per_copy is None:
+                d += paper_sinusoid(t, self.n_uav, cfg.amplitude, cfg.period)
+            else:
+                d += per_copy.amplitude * paper_sinusoid(t, self.n_uav, 1.0, cfg.period)
             if self.uniform_dim:
                 d += cfg.noise_scale * noise[..., : self.uniform_dim]
         if self.gust_dim:
-            innovation = self._innovation_scale * noise[..., self.uniform_dim :]
+            scale = self._innovation_scale
+            if per_copy is not None:
+                scale = per_copy.gust_std * np.sqrt(1.0 - self.gust_decay**2)
+            innovation = scale * noise[..., self.uniform_dim :]
             gust = self.gust_decay * gust + innovation
         return d, gust
 

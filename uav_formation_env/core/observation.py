@@ -107,6 +107,7 @@ def build_observations(
     obstacle_radii: np.ndarray,
     min_separation: np.ndarray,
     mirrored: bool = False,
+    obstacle_present: np.ndarray | None = None,
 ) -> np.ndarray:
     """Every agent's observation.
 
@@ -117,11 +118,13 @@ def build_observations(
         adjacency: (B, N, N) h_ij, row = receiver.
         avoiding: (B, N) bool.
         time_fraction: (B,) t / duration.
-        offsets: (N, 6) formation offsets z^d.
-        obstacle_centers: (O, 2) [m].
-        obstacle_radii: (O,) [m].
+        offsets: (N, 6) formation offsets z^d, or (B, N, 6) per copy.
+        obstacle_centers: (O, 2) [m], or (B, O, 2) per copy.
+        obstacle_radii: (O,) [m], or (B, O) per copy.
         min_separation: (B, N) nearest other UAV [m].
         mirrored: literal mirrored-offset reading.
+        obstacle_present: (B, O) bool for per-copy obstacles: padding obstacles are never the
+            nearest, and slot 17 says whether the copy has any obstacle.
 
     Returns:
         (B, N, dim) float32.
@@ -139,16 +142,23 @@ def build_observations(
     raw[..., 9:12] = estimate
     raw[..., 12] = time_fraction[:, None]
     raw[..., 13] = avoiding
-    n_obs = len(obstacle_radii)
+    n_obs = obstacle_radii.shape[-1]
     if n_obs:
-        rel = obstacle_centers[None, None] - z[:, :, None, :2]  # (B, N, O, 2)
+        per_copy = obstacle_radii.ndim == 2
+        centres = obstacle_centers[:, None] if per_copy else obstacle_centers[None, None]
+        rel = centres - z[:, :, None, :2]  # (B, N, O, 2)
         centre_dist = np.sqrt(np.einsum("bnok,bnok->bno", rel, rel))
-        surface = centre_dist - obstacle_radii  # (B, N, O)
+        surface = centre_dist - (obstacle_radii[:, None] if per_copy else obstacle_radii)
+        if obstacle_present is not None:
+            surface = np.where(obstacle_present[:, None], surface, np.inf)
         # flat index of each UAV's nearest obstacle in the (B·N·O,) flattening
         nearest = _arange(batch * n_uav, n_obs) + surface.argmin(axis=-1).ravel()
         raw[..., 14:16] = rel.reshape(-1, 2).take(nearest, axis=0).reshape(batch, n_uav, 2)
         raw[..., 16] = surface.take(nearest).reshape(batch, n_uav)
         raw[..., 17] = 1.0
+        if obstacle_present is not None:  # a copy without obstacles: zeros, as below
+            none = ~obstacle_present.any(axis=1)
+            raw[none, :, 14:18] = 0.0
     else:
         raw[..., 14:18] = 0.0
     raw[..., 18] = min_separation
@@ -174,6 +184,31 @@ class DecodedObservation:
     avoiding: np.ndarray  # (...) bool
     neighbour: np.ndarray  # (..., N-1) bool, h_ij of the k-th other UAV
     relative_formation_error: np.ndarray  # (..., N-1, 6) a_j - a_i [m, m/s]
+
+
+def require_full_layout(scenario, policy: str) -> None:
+    """Refuse, naming the option, a scenario whose observations ``policy`` cannot decode.
+
+    The reference DMPC and the heuristic decode the full layout above and read the mission
+    data (formation offsets, schedule) from the scenario; a scene that draws the formation per
+    reset, or the N-independent layout, is not decodable by them yet.
+
+    Args:
+        scenario: a :class:`~uav_formation_env.config.Scenario`.
+        policy: the policy's name, for the message.
+    """
+    if scenario.observation.kind != "full":
+        raise ValueError(
+            f"{policy} decodes observation.kind='full', but scenario {scenario.name!r} uses "
+            f"{scenario.observation.kind!r}"
+        )
+    scene = scenario.scene
+    if scene is not None and (scene.n_uav is not None or scene.shapes is not None):
+        raise ValueError(
+            f"{policy} reads the formation from the scenario, but scenario {scenario.name!r} "
+            "draws it per reset (scene.n_uav / scene.shapes); run it on a drawn scene "
+            "(uav_formation_env.scenes.draw_scene) instead"
+        )
 
 
 def decode_observations(obs: np.ndarray, n_uav: int) -> DecodedObservation:

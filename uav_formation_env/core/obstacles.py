@@ -16,12 +16,16 @@ Shapes: B scenario copies, O obstacles, N UAVs. :func:`relative_geometry` works 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from uav_formation_env.config import AvoidanceConfig
 from uav_formation_env.core.reference import config_cache
 
 __all__ = [
+    "ABSENT_CENTRE",
+    "ObstacleField",
     "choose_sides",
     "deflection_demand",
     "detection_sq",
@@ -29,11 +33,87 @@ __all__ = [
     "in_range",
     "obstacle_arrays",
     "obstacle_distances",
+    "obstacle_field",
     "relative_geometry",
     "tangent_direction",
 ]
 
 _EPS = 1e-9  # lengths / speeds below this count as zero [m], [m/s]
+# Centre of a padding obstacle: far from any route, yet finite so its geometry has no NaNs [m]
+ABSENT_CENTRE = 1.0e9
+
+
+@dataclass(frozen=True)
+class ObstacleField:
+    """The obstacles of each copy, padded to a common count O (scene distributions draw a field
+    per reset; a shared field is the same rows in every copy).
+
+    Padding obstacles (``present`` False) sit at :data:`ABSENT_CENTRE` with radius 1 m: they never
+    activate, are never the nearest obstacle of a UAV on a route, and are masked in
+    observations and metrics.
+
+    Attributes:
+        centres: (B, O, 2) horizontal centres [m].
+        radii: (B, O) [m].
+        r_safe: (B, O) safety radii R_s = radius + safety_margin [m].
+        r_detect: (B, O) detection radii d^o = radius + detection_margin [m].
+        present: (B, O) bool, real obstacles.
+    """
+
+    centres: np.ndarray
+    radii: np.ndarray
+    r_safe: np.ndarray
+    r_detect: np.ndarray
+    present: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """O, obstacles per copy (padding included)."""
+        return self.radii.shape[1]
+
+    def set_copy(self, copy: int, avoidance: AvoidanceConfig) -> None:
+        """Write copy ``copy``'s rows (in place) from a configuration's obstacles and margins."""
+        n = len(avoidance.obstacles)
+        if n > self.count:
+            raise ValueError(f"{n} obstacles do not fit the padded count {self.count}")
+        self.centres[copy] = ABSENT_CENTRE
+        self.radii[copy] = 1.0
+        self.present[copy] = False
+        self.present[copy, :n] = True
+        if n:
+            self.centres[copy, :n] = [ob.center for ob in avoidance.obstacles]
+            self.radii[copy, :n] = [ob.radius for ob in avoidance.obstacles]
+        self.r_safe[copy] = self.radii[copy] + avoidance.safety_margin
+        self.r_detect[copy] = self.radii[copy] + avoidance.detection_margin
+
+    def take(self, mask: np.ndarray, source: ObstacleField) -> None:
+        """Copy the ``mask`` copies' rows of ``source`` into this field (in place)."""
+        for name in ("centres", "radii", "r_safe", "r_detect", "present"):
+            getattr(self, name)[mask] = getattr(source, name)[mask]
+
+
+def obstacle_field(
+    avoidances: list[AvoidanceConfig] | tuple[AvoidanceConfig, ...], count: int | None = None
+) -> ObstacleField:
+    """The :class:`ObstacleField` of one avoidance configuration per copy.
+
+    Args:
+        avoidances: B configurations (margins and obstacles of each copy).
+        count: O, padded obstacle count (None: the largest count among the copies).
+    """
+    if count is None:
+        count = max((len(a.obstacles) for a in avoidances), default=0)
+    batch = len(avoidances)
+    field = ObstacleField(
+        centres=np.full((batch, count, 2), ABSENT_CENTRE),
+        radii=np.ones((batch, count)),
+        r_safe=np.zeros((batch, count)),
+        r_detect=np.zeros((batch, count)),
+        present=np.zeros((batch, count), dtype=bool),
+    )
+    for b, avoidance in enumerate(avoidances):
+        field.set_copy(b, avoidance)
+    return field
 
 
 @config_cache
@@ -97,7 +177,7 @@ def relative_geometry(
 
     Args:
         positions: (B, N, 3) or (B, N, 2) [m].
-        centres: (O, 2) obstacle centres [m].
+        centres: (O, 2) obstacle centres shared by every copy, or (B, O, 2) per copy [m].
         e_hat: (B, 2) along-track unit vector ê [-]; n̂ = ê rotated +90°.
 
     Returns:
@@ -107,8 +187,12 @@ def relative_geometry(
     # contiguous (N, B) copies: ufunc results inherit their inputs' memory order
     px = np.ascontiguousarray(positions[:, :, 0].T)
     py = np.ascontiguousarray(positions[:, :, 1].T)
-    rel_x = px[None] - centres[:, 0, None, None]
-    rel_y = py[None] - centres[:, 1, None, None]
+    if centres.ndim == 3:  # per copy: (B, O, 2) -> (O, 1, B)
+        cx, cy = centres[..., 0].T[:, None, :], centres[..., 1].T[:, None, :]
+    else:
+        cx, cy = centres[:, 0, None, None], centres[:, 1, None, None]
+    rel_x = px[None] - cx
+    rel_y = py[None] - cy
     dist = np.sqrt(rel_x**2 + rel_y**2)
     ex, ey = e_hat[:, 0], e_hat[:, 1]
     lon = rel_x * ex + rel_y * ey
@@ -179,17 +263,22 @@ def tangent_direction(
     return lx / norm, ly / norm
 
 
-def obstacle_distances(positions: np.ndarray, avoidance: AvoidanceConfig) -> np.ndarray:
+def obstacle_distances(
+    positions: np.ndarray, avoidance: AvoidanceConfig | ObstacleField
+) -> np.ndarray:
     """Horizontal distance from each UAV to each obstacle centre.
 
     Args:
         positions: (B, N, 3) [m].
-        avoidance: obstacles.
+        avoidance: the obstacles of a configuration (shared by every copy), or a per-copy field.
 
     Returns:
         (B, N, O) [m].
     """
-    centres, _, _ = obstacle_arrays(avoidance)
+    if isinstance(avoidance, ObstacleField):
+        centres = avoidance.centres[:, None]  # (B, 1, O, 2)
+    else:
+        centres = obstacle_arrays(avoidance)[0]
     positions = np.asarray(positions, dtype=float)
     rel_sq = np.square(positions[..., :, None, :2] - centres)
     return np.sqrt(rel_sq[..., 0] + rel_sq[..., 1])
@@ -234,11 +323,10 @@ def deflection_demand(
     Returns the signed angle from ê to the UAV's own tangent direction, positive towards the side
     of each group slot (``slot_sides``, e.g. (+1, -1)), shape (O, 2, N, B) [rad]. The group's
     guide is the in-range member with the largest value: the one the group must follow for every
-    member to clear.
+    member to clear. ``r_safe`` is (O,) shared or (O, 1, B) per copy [m].
     """
     sides = np.asarray(slot_sides)[None, :, None, None].astype(float)
-    lx, ly = tangent_direction(
-        rel_x[:, None], rel_y[:, None], dist[:, None], r_safe[:, None, None, None], sides
-    )
+    r_safe = r_safe[:, None] if r_safe.ndim == 3 else r_safe[:, None, None, None]
+    lx, ly = tangent_direction(rel_x[:, None], rel_y[:, None], dist[:, None], r_safe, sides)
     ex, ey = e_hat[:, 0], e_hat[:, 1]
     return np.arctan2(sides * (ex * ly - ey * lx), ex * lx + ey * ly)

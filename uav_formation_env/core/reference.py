@@ -16,6 +16,7 @@ from uav_formation_env.config import ScheduleConfig
 
 __all__ = [
     "config_cache",
+    "next_leg",
     "preset_displacement",
     "preset_velocity",
     "reference_preview",
@@ -85,6 +86,28 @@ def preset_velocity(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
     times, velocities = schedule_arrays(schedule)
     index = times.searchsorted(np.asarray(t, dtype=float) - _TIME_TOL, side="left")
     return velocities.take(index, axis=0)  # a new array even for scalar t
+
+
+def next_leg(schedule: ScheduleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The preset velocity of the next leg and the time until it starts (the same leg rule as
+    :func:`preset_velocity`).
+
+    Args:
+        schedule: switching times and velocities.
+        t: (...) time [s].
+
+    Returns:
+        ``(velocity, wait)``: (..., 3) [m/s] and (...) [s]; on the last leg, its own velocity and
+        0 s.
+    """
+    times, velocities = schedule_arrays(schedule)
+    t = np.asarray(t, dtype=float)
+    index = times.searchsorted(t - _TIME_TOL, side="left")  # the current leg
+    last = len(times)  # index of the last leg
+    if last == 0:
+        return velocities.take(index, axis=0), np.zeros(t.shape)
+    switch = np.where(index < last, times.take(np.minimum(index, last - 1)), t)
+    return velocities.take(np.minimum(index + 1, last), axis=0), np.maximum(switch - t, 0.0)
 
 
 def preset_displacement(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:

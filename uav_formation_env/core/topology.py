@@ -65,6 +65,7 @@ import numpy as np
 
 from uav_formation_env.config import AvoidanceConfig, ScheduleConfig
 from uav_formation_env.core.obstacles import (
+    ObstacleField,
     choose_sides,
     deflection_demand,
     detection_sq,
@@ -209,6 +210,7 @@ def update_topology(
     avoidance: AvoidanceConfig,
     schedule: ScheduleConfig,
     base_adjacency: np.ndarray,
+    obstacles: ObstacleField | None = None,
 ) -> tuple[TopologyState, TopologyOutput]:
     """One topology update (activation, guides and ends, outputs; see the module docstring).
 
@@ -223,7 +225,9 @@ def update_topology(
         t: (B,) or scalar current time [s].
         avoidance: obstacles, margins and the reference-speed rule.
         schedule: preset velocity (eq. 23).
-        base_adjacency: (N, N) H0, row = receiver.
+        base_adjacency: (N, N) H0 shared by every copy, or (B, N, N) per copy; row = receiver.
+        obstacles: per-copy obstacles (scene distributions); None: ``avoidance.obstacles`` in
+            every copy. The margins and rules always come from ``avoidance``.
 
     Returns:
         The new state and this step's outputs.
@@ -237,8 +241,9 @@ def update_topology(
             f"shape mismatch: state side {state.side.shape}, positions {positions.shape}, "
             f"velocities {velocities.shape}"
         )
-    if n_obs != len(avoidance.obstacles):
-        raise ValueError(f"state has {n_obs} obstacles, config has {len(avoidance.obstacles)}")
+    n_config = len(avoidance.obstacles) if obstacles is None else obstacles.count
+    if n_obs != n_config:
+        raise ValueError(f"state has {n_obs} obstacles, the obstacle field has {n_config}")
     t = np.asarray(t, dtype=float)
     if t.shape != (batch,):
         t = np.broadcast_to(t, (batch,))
@@ -247,17 +252,24 @@ def update_topology(
     if n_obs == 0:
         return state, _idle_output(preset, h0, batch, n_uav, n_obs)
 
-    centres, r_safe, r_detect = obstacle_arrays(avoidance)
+    if obstacles is None:  # one field for every copy: (O,) radii broadcast as (O, 1, 1)
+        centres, r_safe, r_detect = obstacle_arrays(avoidance)
+        r_detect_sq, present = detection_sq(avoidance), True
+        fast_centres, r_safe_b, r_detect_b = centres, r_safe[:, None, None], r_detect[:, None]
+    else:  # per copy: batch-last (O, 1, B) and (O, B)
+        centres, r_detect_sq = obstacles.centres, obstacles.r_detect**2
+        fast_centres, present = centres[:, None], obstacles.present.T
+        r_safe_b, r_detect_b = obstacles.r_safe.T[:, None, :], obstacles.r_detect.T
     if not (state.status == ACTIVE).any():
         # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
         # detection radius, so nothing can activate (activation needs min_i D_i < d^o).
-        rel, r_detect_sq = positions[:, :, None, :2] - centres, detection_sq(avoidance)
+        rel = positions[:, :, None, :2] - fast_centres
         near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect_sq) & (state.status == IDLE)
         if not near_idle.any():
             return _copy_state(state), _idle_output(preset, h0, batch, n_uav, n_obs)
     e_hat, _ = heading_frame(preset)
     rel_x, rel_y, dist, lon, lat = relative_geometry(positions, centres, e_hat)  # (O, N, B)
-    near = in_range(lon, lat, r_safe[:, None, None])
+    near = in_range(lon, lat, r_safe_b)
 
     status = _batch_last(state.status)  # (O, B), modified in place below
     side = _batch_last(state.side)  # (O, N, B)
@@ -270,7 +282,7 @@ def update_topology(
     # 1. activation: at most one active obstacle per copy, the nearest candidate wins
     min_dist = dist.min(axis=1)  # (O, B)
     busy = (status == ACTIVE).any(axis=0)  # (B,)
-    candidate = (status == IDLE) & near.any(axis=1) & (min_dist < r_detect[:, None]) & ~busy
+    candidate = (status == IDLE) & near.any(axis=1) & (min_dist < r_detect_b) & ~busy & present
     chosen = _first_argmin(np.where(candidate, min_dist, np.inf), axis=0)  # (B,)
     activated = candidate & (np.arange(n_obs)[:, None] == chosen)  # (O, B)
     if activated.any():
@@ -288,7 +300,8 @@ def update_topology(
     if active.any():
         member = side[:, None] == _SLOT_SIDES[:, None, None]  # (O, 2, N, B)
         eligible = member & near[:, None]
-        demand = deflection_demand(rel_x, rel_y, dist, r_safe, e_hat, _SLOT_SIDES)  # (O, 2, N, B)
+        r_safe_d = r_safe if obstacles is None else r_safe_b
+        demand = deflection_demand(rel_x, rel_y, dist, r_safe_d, e_hat, _SLOT_SIDES)  # (O,2,N,B)
         best = _first_argmin(np.where(eligible, -demand, np.inf), axis=2)  # (O, 2, B)
         has_guide = eligible.any(axis=2)
         guide = np.where(active[:, None], np.where(has_guide, best, -1), guide)
@@ -312,7 +325,7 @@ def update_topology(
     output.restored = np.ascontiguousarray(restored.T)
     active = status == ACTIVE
     if active.any():
-        geometry = (rel_x, rel_y, dist, r_safe)
+        geometry = (rel_x, rel_y, dist, np.broadcast_to(r_safe_b, (n_obs, 1, batch)))
         _avoidance_output(
             output, active, side, guide, ended, case, geometry, velocities, preset, avoidance
         )
@@ -357,7 +370,7 @@ def _avoidance_output(
         output: idle outputs of this update, modified in place.
         active: (O, B) bool, at most one True per copy.
         side, guide, ended, case: batch-last state, (O, N, B), (O, 2, B), (O, 2, B), (O, B).
-        geometry: rel_x, rel_y, dist (O, N, B) [m] and R_s (O,) [m].
+        geometry: rel_x, rel_y, dist (O, N, B) [m] and R_s (O, 1, B) [m].
         velocities: (B, N, 3) [m/s].
         preset: (B, 3) preset velocity now [m/s].
         avoidance: reference-speed rule.
@@ -384,7 +397,8 @@ def _avoidance_output(
 
     g = np.maximum(guide_a, 0)  # (B, 2)
     at = (a[:, None], g, cols[:, None])
-    lx, ly = tangent_direction(rel_x[at], rel_y[at], dist[at], r_safe[a][:, None], _SLOT_SIDES)
+    r_guide = r_safe[a, 0, cols][:, None]  # (B, 1) R_s of each copy's active obstacle
+    lx, ly = tangent_direction(rel_x[at], rel_y[at], dist[at], r_guide, _SLOT_SIDES)
     if avoidance.reference_speed == "preset":
         speed = np.sqrt((preset**2).sum(axis=1))[:, None]  # (B, 1)
     else:

@@ -27,7 +27,8 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.observation import OBSERVATION_BOUND, observation_dim
+from uav_formation_env.core.local_observation import observation_size
+from uav_formation_env.core.observation import OBSERVATION_BOUND
 from uav_formation_env.episode import EpisodeStep, FormationEpisodes
 
 ScenarioLike = str | Path | Scenario | Mapping[str, Any]
@@ -60,7 +61,7 @@ class _BatchedView(gymnasium.vector.VectorEnv):
         self.scenario = resolve_with_overrides(scenario, overrides)
         self.episodes = FormationEpisodes(self.scenario, int(copies), autoreset=True)
         self.n_uav = self.scenario.n_uav
-        self.obs_dim = observation_dim(self.n_uav)
+        self.obs_dim = observation_size(self.scenario)
 
     def _spaces(self, entries: int, obs_size: int, act_size: int) -> None:
         """Single and batched spaces of ``entries`` rows of ``obs_size`` / ``act_size`` values."""

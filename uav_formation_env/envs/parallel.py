@@ -70,8 +70,13 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.observation import OBSERVATION_BOUND, observation_dim
-from uav_formation_env.episode import FormationEpisodes, StepResult, validate_actions
+from uav_formation_env.episode import (
+    FormationEpisodes,
+    StepResult,
+    observation_bounds,
+    validate_actions,
+)
+from uav_formation_env.scenes import draw_scene, n_uav_range
 from uav_formation_env.seeding import check_seed
 
 RENDER_MODES = ["rgb_array", "human"]
@@ -128,17 +133,29 @@ class UAVFormationParallelEnv(ParallelEnv):
         self.info_mode = info_mode
         self.scenario = scenario
         self.render_mode = render_mode
-        self.episodes = FormationEpisodes(scenario, batch_size=1)
+        # a distribution over N draws N per reset: the agents of a reset are the first N of
+        # possible_agents (PettingZoo's contract), and the env rebuilds its one-copy episode
+        # layer whenever N changes
+        low, high = (
+            (scenario.n_uav, scenario.n_uav) if scenario.scene is None else n_uav_range(scenario)
+        )
+        if low != high and scenario.observation.kind != "local":
+            raise ValueError(
+                f"scenario {scenario.name!r} draws N in {low}..{high} per reset: its "
+                "observation.kind must be 'local' (the full layout's size depends on N)"
+            )
+        self.episodes = FormationEpisodes(scenario, batch_size=1, n_uav=low)
         self.sim = self.episodes.sim
-        self.possible_agents = agent_names(scenario.n_uav)
+        self.possible_agents = agent_names(high)
+        self._names = agent_names(low)  # the agents of the current episode
+        self._seed_stream: np.random.Generator | None = None  # seeds of unseeded resets
         self.agents: list[str] = []
-        dim = observation_dim(scenario.n_uav)
-        bound = OBSERVATION_BOUND
-        obs_space = spaces.Box(-bound, bound, shape=(dim,), dtype=np.float32)
+        obs_low, obs_high = observation_bounds(scenario, low)
+        obs_space = spaces.Box(obs_low, obs_high, dtype=np.float32)
         act_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
         self.observation_spaces = {a: obs_space for a in self.possible_agents}
         self.action_spaces = {a: act_space for a in self.possible_agents}
-        n = scenario.n_uav
+        n = high  # a smaller N's state is padded with zeros to this size
         self.state_space = spaces.Box(
             -np.inf, np.inf, shape=(12 * n + 1 + n * n,), dtype=np.float32
         )
@@ -170,11 +187,33 @@ class UAVFormationParallelEnv(ParallelEnv):
         """Start an episode; ``seed`` (None or an int >= 0) makes it (and later unseeded resets)
         reproducible."""
         seed = check_seed(seed)
+        if self.scenario.scene is not None:
+            seed = self._scene_for(seed)
         self._result = self.episodes.reset(seed=None if seed is None else [seed]).result
-        self.agents = list(self.possible_agents)
+        self.agents = list(self._names)
         if self._renderer is not None:
             self._renderer.reset()
-        return self._observations(), self._infos(np.zeros(self.scenario.n_uav))
+        return self._observations(), self._infos(np.zeros(len(self._names)))
+
+    def _scene_for(self, seed: int | None) -> int | None:
+        """For a distribution over N: the seed of this reset (an unseeded reset takes the next
+        seed of the stream the last seed started, or fresh entropy) and an episode layer of the
+        N that seed draws. Other scenarios: the seed as it is."""
+        low, high = n_uav_range(self.scenario)
+        if low == high:
+            return seed
+        if seed is not None:
+            self._seed_stream = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
+        else:
+            stream = self._seed_stream or np.random.default_rng()
+            seed = int(stream.integers(2**63))
+        n_uav = draw_scene(self.scenario, np.random.default_rng(seed)).n_uav
+        if n_uav != self.episodes.n_uav:
+            self.episodes = FormationEpisodes(self.scenario, batch_size=1, n_uav=n_uav)
+            self.sim = self.episodes.sim
+            self._names = agent_names(n_uav)
+            self._neighbour_cache.clear()
+        return seed
 
     def step(self, actions: dict[str, np.ndarray]) -> tuple[dict, dict, dict, dict, dict]:
         """Advance one control step δ with every live agent's normalised action."""
@@ -197,12 +236,12 @@ class UAVFormationParallelEnv(ParallelEnv):
 
     def _observations(self) -> dict[str, np.ndarray]:
         obs = self.episodes.observe()[0]
-        return dict(zip(self.possible_agents, obs))  # row views, as obs[i]
+        return dict(zip(self._names, obs))  # row views, as obs[i]
 
     def _infos(self, penalty: np.ndarray, total: np.ndarray | None = None) -> dict[str, dict]:
         """Every agent's info dict; ``total`` is the (N,) stage cost if already summed."""
         r = self._result
-        names = self.possible_agents
+        names = self._names
         # one conversion per quantity, then per-agent views: this runs every step
         if total is None:
             total = r.cost.total[0]
@@ -272,7 +311,7 @@ class UAVFormationParallelEnv(ParallelEnv):
         key = receives.tobytes()
         names = self._neighbour_cache.get(key)
         if names is None:
-            agents = self.possible_agents
+            agents = self._names
             names = tuple(
                 tuple(agents[j] for j, flag in enumerate(row) if flag) for row in receives.tolist()
             )
@@ -285,7 +324,11 @@ class UAVFormationParallelEnv(ParallelEnv):
         """Global state (see the module docstring)."""
         if self._result is None:
             raise RuntimeError("call reset() before state()")
-        return self.episodes.state()[0]
+        state = self.episodes.state()[0]
+        size = self.state_space.shape[0]
+        if state.size < size:  # a smaller N of a distribution over N
+            state = np.concatenate((state, np.zeros(size - state.size, dtype=state.dtype)))
+        return state
 
     def render(self) -> np.ndarray | None:
         """Top view: an RGB array ("rgb_array") or a window ("human")."""

@@ -84,7 +84,9 @@ def _none_for_nan(x: np.ndarray) -> list[float | None]:
 
 def mission_of(batch: EpisodeBatch) -> MissionMetrics:
     """The mission metrics (:mod:`~uav_formation_env.evaluation.mission`) of an episode batch."""
-    return mission_metrics(batch.scenario, batch.t, batch.z, batch.collision, batch.min_separation)
+    return mission_metrics(
+        batch.scenario, batch.t, batch.z, batch.collision, batch.min_separation, batch.scenes
+    )
 
 
 def summarise(batch: EpisodeBatch) -> dict[str, Any]:

@@ -22,12 +22,14 @@ against the mission itself:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.obstacles import obstacle_field
 from uav_formation_env.core.reference import preset_displacement, preset_velocity, route_error
 
 # two-sided 95 % Student t quantiles for 1..30 degrees of freedom
@@ -119,10 +121,12 @@ def _segment_distance(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
 
     Args:
         points: (T, B, 2) polyline vertices [m].
-        centre: (O, 2) [m].
+        centre: (O, 2) or (B, O, 2) [m].
     """
     if len(points) < 2:
         return np.linalg.norm(points[0, :, None, :] - centre, axis=-1)
+    if centre.ndim == 3:
+        centre = centre[None]  # (1, B, O, 2)
     a, b = points[:-1, :, None, :], points[1:, :, None, :]  # (T-1, B, 1, 2)
     ab, ac = b - a, centre - a  # (T-1, B, O, 2)
     length2 = (ab**2).sum(-1)
@@ -137,6 +141,7 @@ def mission_metrics(
     z: np.ndarray,
     collision: np.ndarray,
     min_separation: np.ndarray,
+    scenes: Sequence[Scenario] | None = None,
 ) -> MissionMetrics:
     """The mission metrics of B episodes from their trajectories.
 
@@ -146,6 +151,8 @@ def mission_metrics(
         z: (T+1, B, N, 6) states [m, m/s].
         collision: (T, B, N) bool, collision flags after each step.
         min_separation: (T+1, B, N) distance of each UAV to its nearest other UAV [m].
+        scenes: the concrete scenario of each episode, for a scene distribution (their
+            obstacles, padded to the largest count O; padding is never required nor met).
     """
     t = np.asarray(t, dtype=float)
     p, v = z[..., :3], z[..., 3:]
@@ -155,17 +162,18 @@ def mission_metrics(
     v_preset = preset_velocity(scenario.schedule, t)[:, None, None, :]
     velocity_error2 = ((v - v_preset) ** 2).sum(axis=-1)  # (T+1, B, N)
 
-    avoidance = scenario.avoidance
     batch = z.shape[1]
-    centres = np.array([o.center for o in avoidance.obstacles], dtype=float).reshape(-1, 2)
-    detection = np.array([o.radius + avoidance.detection_margin for o in avoidance.obstacles])
-    if len(centres):
-        distance = np.linalg.norm(p[..., None, :2] - centres, axis=-1).min(axis=2)  # (T+1,B,O)
-        within = distance <= detection
+    field = obstacle_field(
+        [scenario.avoidance] * batch if scenes is None else [s.avoidance for s in scenes]
+    )
+    centres, detection, present = field.centres, field.r_detect, field.present  # (B, O, ...)
+    if field.count:
+        distance = np.linalg.norm(p[..., None, :2] - centres[:, None], axis=-1).min(axis=2)
+        within = (distance <= detection) & present  # (T+1, B, O)
         met = within.any(axis=0)
         time_met = np.where(met, t[within.argmax(axis=0)], np.nan)
-        closest = distance.min(axis=0)
-        required = _segment_distance(route[..., :2], centres) <= detection
+        closest = np.where(present, distance.min(axis=0), np.nan)
+        required = (_segment_distance(route[..., :2], centres) <= detection) & present
     else:
         met = required = np.zeros((batch, 0), dtype=bool)
         time_met = closest = np.zeros((batch, 0))
@@ -188,6 +196,11 @@ def mission_metrics(
         min_separation_time=t[1:][closest_step],
         max_route_error=scenario.mission.max_route_error,
     )
+
+
+def _nan_min(x: np.ndarray) -> float | None:
+    """Smallest value ignoring NaN (an obstacle absent from a drawn scene), None if all are."""
+    return None if np.isnan(x).all() else float(np.nanmin(x))
 
 
 def _list(x: np.ndarray, digits: int = 6) -> list[Any]:
@@ -225,7 +238,8 @@ def mission_summary(metrics: MissionMetrics, seeds: list[int]) -> dict[str, Any]
             "required_per_seed": metrics.obstacle_required[:, o].tolist(),
             "met": int(metrics.obstacle_met[:, o].sum()),
             "met_per_seed": metrics.obstacle_met[:, o].tolist(),
-            "closest_center_m": float(metrics.obstacle_closest[:, o].min()),
+            "present_per_seed": (~np.isnan(metrics.obstacle_closest[:, o])).tolist(),
+            "closest_center_m": _nan_min(metrics.obstacle_closest[:, o]),
             "closest_center_m_per_seed": _list(metrics.obstacle_closest[:, o]),
             "time_met_s_per_seed": _list(metrics.obstacle_time_met[:, o]),
         }

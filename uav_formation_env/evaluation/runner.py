@@ -57,6 +57,8 @@ class EpisodeBatch:
     nash_gap: np.ndarray | None = None  # (T, B, N) J_i(plan) - min J_i, others' plans fixed
     nash_cost: np.ndarray | None = None  # (T, B, N) J_i of the plan over the horizon
     nash_in_box: np.ndarray | None = None  # (T, B, N) bool, the plan lies in the UAV's box
+    # the concrete scenario of each episode (a scene distribution draws one per seed), else None
+    scenes: list[Scenario] | None = None
 
     @property
     def n_steps(self) -> int:
@@ -95,6 +97,8 @@ def concatenate_batches(parts: Sequence[EpisodeBatch]) -> EpisodeBatch:
         values = [getattr(p, name) for p in parts]
         if name in ("scenario", "seeds", "policy_name", "t"):
             fields.setdefault(name, values[0])
+        elif name == "scenes":
+            fields[name] = None if values[0] is None else [s for v in values for s in v]
         elif name in _TIMINGS:
             fields[name] = np.sum(values, axis=0)
         elif name == "cost_terms":
@@ -147,7 +151,7 @@ def run_episodes(
     batch, n_steps = len(seeds), scenario.n_steps
     # evaluation's rule: every seed is flown to its end, collisions are counted, not ended on
     episodes = FormationEpisodes(scenario, batch, fly_on_after_collision=True)
-    sim = episodes.sim
+    sim, n_uav = episodes.sim, episodes.n_uav
     if hasattr(policy, "reset"):
         policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
     start = time.perf_counter()
@@ -155,9 +159,10 @@ def run_episodes(
     result, obs = step.result, step.observation
 
     def centre_min(z: np.ndarray) -> np.ndarray:
-        if len(sim.obstacle_radii) == 0:
+        if sim.obstacle_radii.shape[-1] == 0:
             return np.zeros((batch, 0))
-        return obstacle_distances(z[..., :3], scenario.avoidance).min(axis=1)
+        field = scenario.avoidance if sim.obstacles is None else sim.obstacles
+        return obstacle_distances(z[..., :3], field).min(axis=1)
 
     states = [_state_record(result, centre_min)]
     steps: list[tuple] = []
@@ -173,10 +178,9 @@ def run_episodes(
         t0 = time.perf_counter()
         actions = np.asarray(policy.act_batch(obs), dtype=float)
         t1 = time.perf_counter()
-        if actions.shape != (batch, scenario.n_uav, 3):
+        if actions.shape != (batch, n_uav, 3):
             raise ValueError(
-                f"policy returned actions of shape {actions.shape}, "
-                f"expected {(batch, scenario.n_uav, 3)}"
+                f"policy returned actions of shape {actions.shape}, expected {(batch, n_uav, 3)}"
             )
         if nash_gap:
             gap = measure_nash_gap(obs, scenario, policy_plans(policy, obs, actions, scenario))
@@ -243,6 +247,7 @@ def run_episodes(
         nash_gap=gap_arrays[0],
         nash_cost=gap_arrays[1],
         nash_in_box=gap_arrays[2],
+        scenes=None if scenario.scene is None else list(sim.scenes),
     )
 
 

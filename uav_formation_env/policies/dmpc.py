@@ -81,7 +81,11 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario
-from uav_formation_env.core.observation import decode_observations, observation_dim
+from uav_formation_env.core.observation import (
+    decode_observations,
+    observation_dim,
+    require_full_layout,
+)
 from uav_formation_env.policies.broadcast import shift_warm_start
 from uav_formation_env.policies.dmpc_step import DMPCRecords, StepRecord, step_solver
 from uav_formation_env.policies.registry import DMPC_OPTIMIZERS, SolverConfig, solver_config
@@ -158,6 +162,7 @@ class NashDMPCPolicy:
         self._rngs: list[np.random.Generator] = []
         self._fresh = False  # reset() was called and no step taken since
         sc = self.scenario
+        require_full_layout(sc, "NashDMPCPolicy")
         self.n_uav = sc.n_uav
         self.horizon = sc.cost.horizon
         self.dt = sc.dynamics.dt

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.observation import observation_dim
+from uav_formation_env.core.local_observation import observation_size
 from uav_formation_env.extras import require
 
 __all__ = ["SB3_ALGORITHMS", "SB3Policy", "TorchScriptPolicy"]
@@ -85,7 +85,7 @@ class SB3Policy:
     def check_scenario(self, scenario: Scenario) -> None:
         """``ValueError`` naming both sizes if the model cannot act on ``scenario``'s
         observations."""
-        expected = observation_dim(scenario.n_uav)
+        expected = observation_size(scenario)
         if self.observation_size != expected:
             raise ValueError(
                 f"the model {self._name()} takes observations of {self.observation_size} values, "
@@ -132,7 +132,7 @@ class TorchScriptPolicy:
     def check_scenario(self, scenario: Scenario) -> None:
         """``ValueError`` naming both sizes if the module cannot take the scenario's observation
         (tried on one observation of zeros)."""
-        dim = observation_dim(scenario.n_uav)
+        dim = observation_size(scenario)
         try:
             self._forward(np.zeros((1, dim), dtype=np.float32))
         except Exception as error:  # noqa: BLE001 - torch raises several kinds on a size mismatch

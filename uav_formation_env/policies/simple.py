@@ -14,7 +14,11 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.cost import relative_offset_sign
-from uav_formation_env.core.observation import decode_observations, others_index
+from uav_formation_env.core.observation import (
+    decode_observations,
+    others_index,
+    require_full_layout,
+)
 from uav_formation_env.policies.heuristic import ConsensusGains, consensus_pd
 from uav_formation_env.seeding import check_seed, copy_streams
 
@@ -63,6 +67,7 @@ class HeuristicPolicy:
     """
 
     def __init__(self, scenario: Scenario, gains: ConsensusGains | None = None) -> None:
+        require_full_layout(scenario, "HeuristicPolicy")
         self.n_uav = scenario.n_uav
         self.u_max = scenario.dynamics.u_max
         self.offsets = np.asarray(scenario.formation.offsets, dtype=float)

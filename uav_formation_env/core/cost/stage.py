@@ -48,11 +48,12 @@ def anchored(z: np.ndarray, offsets: np.ndarray, mirrored: bool = False) -> np.n
 
     Args:
         z: (B, N, *extra, 6) states [m, m/s].
-        offsets: (N, 6) formation offsets z^d.
+        offsets: (N, 6) formation offsets z^d shared by every copy, or (B, N, 6) one shape per
+            copy (scene distributions draw the formation per reset).
         mirrored: literal mirrored-offset reading.
     """
     extra = z.ndim - 3
-    zd = offsets.reshape(offsets.shape[0], *(1,) * extra, 6)
+    zd = offsets.reshape(*offsets.shape[:-1], *(1,) * extra, 6)
     # z - sign·z^d with sign = ±1, without the product (x - (-y) is exactly x + y)
     return z + zd if mirrored else z - zd
 

@@ -1,0 +1,390 @@
+"""Local observations of fixed length: what UAV i senses or receives, whatever the swarm size N.
+
+:mod:`uav_formation_env.core.observation` gives every other UAV a slot, so its length grows with N
+and a policy trained at one N cannot act at another. Here UAV i sees its own state, its ``k``
+nearest in-neighbours (then the nearest other UAVs) and its ``m`` nearest obstacles, so the
+length is ``dim = 19 + 11 k + 5 m`` (73 for the defaults k = 4, m = 2) for any N:
+
+| slot | size | meaning | unit | scale |
+|---|---|---|---|---|
+| 0:3 | 3 | own velocity v_i | m/s | / 20 |
+| 3:6 | 3 | velocity error to the reference, v_i - v^d_i | m/s | / 20 |
+| 6:9 | 3 | reference velocity v^d_i | m/s | / 20 |
+| 9:12 | 3 | disturbance estimate d̂_i + s0_i (0 with the observer off) | m/s^2 | / 0.5 |
+| 12 | 1 | time t / duration | - | 1 |
+| 13 | 1 | 1 if the reference is an avoidance reference (held over a horizon) | - | 1, in [0, 1] |
+| 14 | 1 | distance to the nearest other UAV | m | / 100, clipped ±10 |
+| 15:18 | 3 | preset velocity of the route's next leg | m/s | / 20 |
+| 18 | 1 | time until the next leg starts | s | / 50, clipped [0, 10] |
+| n | 1 | 1 if neighbour slot s holds a UAV j | - | 1, in [0, 1] |
+| n+1 | 1 | neighbour flag h_ij (1: i receives from j, so j enters J_i) | - | 1, in [0, 1] |
+| n+2 : n+5 | 3 | relative position p_j - p_i | m | / 100, clipped ±10 |
+| n+5 : n+8 | 3 | relative formation position error (p_j - p^d_j)-(p_i - p^d_i) | m | / 50 |
+| n+8 : n+11 | 3 | relative formation velocity error (v_j-v^d_j)-(v_i-v^d_i) | m/s | / 20 |
+| o | 1 | 1 if obstacle slot q holds a (present) obstacle | - | 1, in [0, 1] |
+| o+1 : o+3 | 2 | obstacle centre minus own position, horizontal | m | / 100, clipped ±10 |
+| o+3 | 1 | obstacle radius | m | / 100, in [0, 100] |
+| o+4 | 1 | distance to the obstacle's surface (< 0 inside) | m | / 100, clipped ±10 |
+
+with n = 19 + 11 s for neighbour slot s = 0..k-1 and o = 19 + 11 k + 5 q for obstacle slot
+q = 0..m-1 (k = 4, m = 2: neighbour slots at 19, 30, 41, 52; obstacle slots at 63, 68).
+
+Every other scaled value is clipped to ±100 (only reached far off course); the scales are those of
+:mod:`~uav_formation_env.core.observation`. Absent slots are all zeros.
+
+Neighbour slots (s = 0..k-1): first UAV i's in-neighbours (h_ij = 1), nearest first by
+``||p_j - p_i||``; if there are fewer than k, the nearest other UAVs follow with flag 0, since the
+separation term and collision avoidance concern every sensed UAV, not only the neighbours; slots
+beyond N - 1 are absent. With more than k in-neighbours the policy sees only the k nearest of them
+(the cost J_i still sums over all). Equal distances are broken by the lowest index j.
+
+Defaults: k = 4 because the paper's graph (``config.PAPER_ADJACENCY``) has in-degree at most 4, so
+at N = 5 every other UAV has a slot and nothing of the paper's J_i is lost; the k-nearest formation
+graphs (``formations.k_nearest_adjacency``) also use k = 4 (symmetrising can add in-neighbours, of
+which the 4 nearest are seen). m = 2: the obstacle being avoided and the next one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from uav_formation_env.config import Scenario
+from uav_formation_env.core.cost import anchored
+from uav_formation_env.core.cost.stage import pair_distances
+from uav_formation_env.core.observation import (
+    DISTANCE_CLIP,
+    DISTANCE_SCALE,
+    ESTIMATE_SCALE,
+    FORMATION_SCALE,
+    OBSERVATION_BOUND,
+    VELOCITY_SCALE,
+    observation_dim,
+)
+
+TIME_SCALE = 50.0  # [s]
+TIME_CLIP = 10.0  # clip of the scaled time to the switch (500 s) [-]
+OWN_DIM = 19
+NEIGHBOUR_DIM = 11
+OBSTACLE_DIM = 5
+_TOP = np.uint64(1 << 63)  # group bit of the neighbour sort key (see _neighbour_keys)
+_SELF = np.uint64(np.iinfo(np.uint64).max)
+
+
+def _check_slots(k: int, m: int) -> None:
+    for name, value in (("k", k), ("m", m)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
+            raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
+
+
+def local_observation_dim(k: int, m: int) -> int:
+    """Length of one agent's local observation with k neighbour and m obstacle slots."""
+    _check_slots(k, m)
+    return OWN_DIM + NEIGHBOUR_DIM * k + OBSTACLE_DIM * m
+
+
+@lru_cache(maxsize=16)
+def _layout(k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(scale, low, high)``, each (dim,): every slot's divisor and clip bounds (read-only)."""
+    dim = local_observation_dim(k, m)
+    scale = np.ones(dim)
+    high = np.full(dim, OBSERVATION_BOUND)
+    low = -high
+    scale[0:9] = VELOCITY_SCALE
+    scale[9:12] = ESTIMATE_SCALE
+    scale[14] = DISTANCE_SCALE
+    scale[15:18] = VELOCITY_SCALE
+    scale[18] = TIME_SCALE
+    low[13], high[13] = 0.0, 1.0
+    low[14], high[14] = -DISTANCE_CLIP, DISTANCE_CLIP
+    low[18], high[18] = 0.0, TIME_CLIP
+    # row s of these views is neighbour slot s (then obstacle slot s): fill all slots at once
+    end = OWN_DIM + NEIGHBOUR_DIM * k
+    sn, ln, hn = (x[OWN_DIM:end].reshape(k, NEIGHBOUR_DIM) for x in (scale, low, high))
+    so, lo, ho = (x[end:].reshape(m, OBSTACLE_DIM) for x in (scale, low, high))
+    ln[:, 0:2], hn[:, 0:2] = 0.0, 1.0  # present, h_ij
+    sn[:, 2:5], ln[:, 2:5], hn[:, 2:5] = DISTANCE_SCALE, -DISTANCE_CLIP, DISTANCE_CLIP
+    sn[:, 5:8] = FORMATION_SCALE
+    sn[:, 8:11] = VELOCITY_SCALE
+    lo[:, 0], ho[:, 0] = 0.0, 1.0  # present
+    so[:, 1:5] = DISTANCE_SCALE
+    lo[:, [1, 2, 4]], ho[:, [1, 2, 4]] = -DISTANCE_CLIP, DISTANCE_CLIP  # centre, surface
+    lo[:, 3] = 0.0  # radius
+    for array in (scale, low, high):
+        array.flags.writeable = False
+    return scale, low, high
+
+
+def local_observation_bounds(k: int = 4, m: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)``, each (dim,) float32: the clip bounds of every slot, e.g. for a
+    ``gymnasium.spaces.Box(low, high, dtype=np.float32)``."""
+    _, low, high = _layout(k, m)
+    return low.astype(np.float32), high.astype(np.float32)
+
+
+def _take_rows(x: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``np.take_along_axis(x, index, axis=-1)`` for (..., n) x and (..., j) index, as one flat
+    ``take`` (take_along_axis builds an index grid per call: ~40% of a small build)."""
+    n = x.shape[-1]
+    rows = np.arange(0, x.size, n).reshape(*index.shape[:-1], 1)
+    return np.ravel(x).take(index + rows)
+
+
+def _k_smallest(key: np.ndarray, k: int) -> np.ndarray:
+    """Indices of the k smallest keys along the last axis, ordered by (key, index).
+
+    Args:
+        key: (..., n) sort keys without NaN.
+        k: how many, >= 0.
+
+    Returns:
+        (..., min(k, n)) int64; ties are broken by the lowest index, so results are deterministic.
+    """
+    n = key.shape[-1]
+    if k >= n:
+        return np.argsort(key, axis=-1, kind="stable")
+    if k == 0:
+        return np.zeros((*key.shape[:-1], 0), dtype=np.int64)
+    # A partial sort (O(n); a full sort costs ~4x at n = 100) puts the k smallest keys first, in
+    # any order. That set is exact unless the k-th and (k+1)-th smallest keys are equal: then
+    # argpartition may take any of the tied keys, and those rows are redone by _k_smallest_tied.
+    part = np.argpartition(key, k, axis=-1)  # the (k+1)-th smallest at k, smaller ones before
+    cols = part[..., :k]
+    values = _take_rows(key, cols)
+    tied = values.max(axis=-1) == _take_rows(key, part[..., k : k + 1])[..., 0]
+    if tied.any():
+        cols[tied] = _k_smallest_tied(key[tied], k)
+        values = _take_rows(key, cols)
+    # order the k by key, then index (lexsort: the last key is the primary one)
+    order = np.lexsort((cols, values), axis=-1)
+    return _take_rows(cols, order)
+
+
+def _k_smallest_tied(key: np.ndarray, k: int) -> np.ndarray:
+    """(R, k) the k smallest of (R, n) keys by (key, index), in ascending index, for 0 < k < n."""
+    # every key below the k-th smallest t, then the lowest-index keys equal to t: exactly k a row
+    t = np.partition(key, k - 1, axis=-1)[:, k - 1 : k]
+    below = key < t
+    tie = key == t
+    need = k - np.count_nonzero(below, axis=-1, keepdims=True)
+    chosen = below | (tie & (np.cumsum(tie, axis=-1) <= need))
+    return np.nonzero(chosen)[1].reshape(len(key), k)
+
+
+def _neighbour_keys(distance: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
+    """(B, N, N) uint64 sort keys: in-neighbours by distance, then other UAVs, the UAV itself last.
+
+    The bits of a non-negative float64 order like its value, so ``bits(d_ij)`` (< 2^63: no sign
+    bit) with the top bit set for non-neighbours is ``d + large (1 - h_ij)`` without rounding:
+    distances never merge, whatever their size. NaN distances count as +inf.
+    """
+    d = np.where(distance >= 0.0, distance, np.inf)
+    bits = d.view(np.uint64)
+    key = np.where(adjacency != 0, bits, bits | _TOP)
+    batch, n_uav = distance.shape[:2]
+    key.reshape(batch, n_uav * n_uav)[:, :: n_uav + 1] = _SELF  # above every other key
+    return key
+
+
+@dataclass(frozen=True)
+class LocalObservations:
+    """Output of :func:`build_local_observations`.
+
+    Attributes:
+        obs: (B, N, dim) float32, the learner's vectors (layout in the module docstring).
+        neighbour_index: (B, N, k) int64, the UAV j in each neighbour slot, -1 where absent:
+            communication metadata (e.g. whose plans to exchange), not part of ``obs``.
+    """
+
+    obs: np.ndarray
+    neighbour_index: np.ndarray
+
+
+def build_local_observations(
+    z: np.ndarray,
+    reference_velocity: np.ndarray,
+    estimate: np.ndarray,
+    adjacency: np.ndarray,
+    avoiding: np.ndarray,
+    time_fraction: np.ndarray,
+    offsets: np.ndarray,
+    obstacle_centers: np.ndarray,
+    obstacle_radii: np.ndarray,
+    obstacle_present: np.ndarray,
+    min_separation: np.ndarray,
+    k: int = 4,
+    m: int = 2,
+    mirrored: bool = False,
+    next_velocity: np.ndarray | None = None,
+    time_to_switch: np.ndarray | None = None,
+) -> LocalObservations:
+    """Every agent's local observation (length independent of N).
+
+    Args:
+        z: (B, N, 6) states [m, m/s].
+        reference_velocity: (B, N, 3) v^d [m/s].
+        estimate: (B, N, 3) disturbance estimate [m/s^2].
+        adjacency: (B, N, N) h_ij, row = receiver i (1: i receives from j).
+        avoiding: (B, N) bool.
+        time_fraction: (B,) t / duration.
+        offsets: (N, 6) or (B, N, 6) formation offsets z^d [m, m/s].
+        obstacle_centers: (B, O, 2) [m]; any values where the obstacle is absent.
+        obstacle_radii: (B, O) [m].
+        obstacle_present: (B, O) bool; absent obstacles are padding and never fill a slot.
+        min_separation: (B, N) distance to the nearest other UAV [m].
+        k: neighbour slots, >= 0.
+        m: obstacle slots, >= 0.
+        mirrored: literal mirrored-offset reading.
+        next_velocity: (B, 3) preset velocity of the route's next leg [m/s]; None: each UAV's
+            current reference (no change ahead).
+        time_to_switch: (B,) time until the next leg starts [s]; None: 0.
+
+    Returns:
+        :class:`LocalObservations` with obs (B, N, dim) and neighbour_index (B, N, k).
+    """
+    _check_slots(k, m)
+    batch, n_uav = z.shape[:2]
+    scale, low, high = _layout(k, m)
+    end = OWN_DIM + NEIGHBOUR_DIM * k
+    # Raw values into one array, then one division by the slot scales and one clip to the slot
+    # bounds (as core.observation): absent slots stay exactly 0.
+    raw = np.empty((batch, n_uav, local_observation_dim(k, m)))
+    v = z[..., 3:]
+    raw[..., 0:3] = v
+    np.subtract(v, reference_velocity, out=raw[..., 3:6])
+    raw[..., 6:9] = reference_velocity
+    raw[..., 9:12] = estimate
+    raw[..., 12] = np.asarray(time_fraction)[:, None]
+    raw[..., 13] = avoiding
+    raw[..., 14] = min_separation
+    raw[..., 15:18] = reference_velocity if next_velocity is None else next_velocity[:, None]
+    raw[..., 18] = 0.0 if time_to_switch is None else np.asarray(time_to_switch)[:, None]
+
+    # neighbour slots
+    key = _neighbour_keys(pair_distances(z[..., :3]), adjacency)
+    index = _k_smallest(key, k)  # (B, N, min(k, N)); the UAV itself only in column N - 1
+    neighbour_index = np.full((batch, n_uav, k), -1, dtype=np.int64)
+    filled = min(k, n_uav - 1)
+    neighbour_index[..., :filled] = index[..., :filled]
+    present = neighbour_index >= 0
+    safe = np.where(present, neighbour_index, 0)
+    flat = safe + (np.arange(batch) * n_uav)[:, None, None]  # into the (B·N) flattening
+    a = anchored(z, np.asarray(offsets, dtype=float), mirrored)  # (B, N, 6)
+    slots = raw[..., OWN_DIM:end].reshape(batch, n_uav, k, NEIGHBOUR_DIM)  # a view
+    slots[..., 0] = present
+    slots[..., 1] = (_take_rows(adjacency, safe) != 0) & present
+    np.subtract(z[..., :3].reshape(-1, 3)[flat], z[:, :, None, :3], out=slots[..., 2:5])
+    np.subtract(a.reshape(-1, 6)[flat], a[:, :, None], out=slots[..., 5:11])
+    slots[~present] = 0.0
+
+    # obstacle slots
+    n_obs = obstacle_radii.shape[1]
+    obstacles = raw[..., end:].reshape(batch, n_uav, m, OBSTACLE_DIM)  # a view
+    obstacles[:] = 0.0
+    if n_obs and m:
+        # padding may hold any centre (1e12, inf, NaN): zero it before any arithmetic
+        centres = np.where(obstacle_present[..., None], obstacle_centers, 0.0)  # (B, O, 2)
+        radii = np.where(obstacle_present, obstacle_radii, 0.0)[:, None]  # (B, 1, O)
+        rel = centres[:, None] - z[:, :, None, :2]  # (B, N, O, 2)
+        surface = np.sqrt(np.einsum("bnok,bnok->bno", rel, rel)) - radii  # (B, N, O)
+        # absent (and non-finite) obstacles sort last and leave their slot absent
+        usable = obstacle_present[:, None] & np.isfinite(surface)
+        order = _k_smallest(np.where(usable, surface, np.inf), m)  # (B, N, min(m, O))
+        used = _take_rows(usable, order)
+        taken = obstacles[..., : order.shape[-1], :]
+        taken[..., 0] = used
+        pick = order + (np.arange(batch * n_uav) * n_obs).reshape(batch, n_uav, 1)
+        taken[..., 1:3] = rel.reshape(-1, 2)[pick]
+        taken[..., 3] = _take_rows(np.broadcast_to(radii, surface.shape), order)
+        taken[..., 4] = surface.reshape(-1).take(pick)
+        taken[~used] = 0.0
+
+    raw /= scale
+    np.maximum(raw, low, out=raw)
+    np.minimum(raw, high, out=raw)
+    return LocalObservations(obs=raw.astype(np.float32), neighbour_index=neighbour_index)
+
+
+@dataclass(frozen=True)
+class DecodedLocalObservation:
+    """Physical quantities recovered from local observations, leading dims (...) of the input."""
+
+    velocity: np.ndarray  # (..., 3) [m/s]
+    velocity_error: np.ndarray  # (..., 3) v - v^d [m/s]
+    reference_velocity: np.ndarray  # (..., 3) [m/s]
+    estimate: np.ndarray  # (..., 3) [m/s^2]
+    time_fraction: np.ndarray  # (...)
+    avoiding: np.ndarray  # (...) bool
+    nearest_distance: np.ndarray  # (...) nearest other UAV [m] (clipped at 1000 m)
+    next_velocity: np.ndarray  # (..., 3) [m/s]
+    time_to_switch: np.ndarray  # (...) [s] (clipped at 500 s)
+    slot_present: np.ndarray  # (..., k) bool
+    neighbour: np.ndarray  # (..., k) bool, h_ij of the UAV in each slot
+    relative_position: np.ndarray  # (..., k, 3) p_j - p_i [m] (clipped at ±1000 m)
+    relative_formation_error: np.ndarray  # (..., k, 6) a_j - a_i [m, m/s]
+    obstacle_present: np.ndarray  # (..., m) bool
+    obstacle_relative: np.ndarray  # (..., m, 2) centre - own position [m] (clipped at ±1000 m)
+    obstacle_radius: np.ndarray  # (..., m) [m]
+    obstacle_surface: np.ndarray  # (..., m) [m] (clipped at ±1000 m)
+
+
+def decode_local_observations(obs: np.ndarray, k: int = 4, m: int = 2) -> DecodedLocalObservation:
+    """Undo the scaling of :func:`build_local_observations` (the unclipped slots exactly).
+
+    Args:
+        obs: (..., dim) observations.
+        k: neighbour slots they were built with.
+        m: obstacle slots they were built with.
+    """
+    dim = local_observation_dim(k, m)
+    obs = np.asarray(obs, dtype=float)
+    if obs.shape[-1] != dim:
+        raise ValueError(f"expected a last axis of {dim} (k={k}, m={m}), got {obs.shape}")
+    lead = obs.shape[:-1]
+    end = OWN_DIM + NEIGHBOUR_DIM * k
+    nb = obs[..., OWN_DIM:end].reshape(*lead, k, NEIGHBOUR_DIM)
+    ob = obs[..., end:].reshape(*lead, m, OBSTACLE_DIM)
+    relative = np.concatenate(
+        (nb[..., 5:8] * FORMATION_SCALE, nb[..., 8:11] * VELOCITY_SCALE), axis=-1
+    )
+    return DecodedLocalObservation(
+        velocity=obs[..., 0:3] * VELOCITY_SCALE,
+        velocity_error=obs[..., 3:6] * VELOCITY_SCALE,
+        reference_velocity=obs[..., 6:9] * VELOCITY_SCALE,
+        estimate=obs[..., 9:12] * ESTIMATE_SCALE,
+        time_fraction=obs[..., 12],
+        avoiding=obs[..., 13] > 0.5,
+        nearest_distance=obs[..., 14] * DISTANCE_SCALE,
+        next_velocity=obs[..., 15:18] * VELOCITY_SCALE,
+        time_to_switch=obs[..., 18] * TIME_SCALE,
+        slot_present=nb[..., 0] > 0.5,
+        neighbour=nb[..., 1] > 0.5,
+        relative_position=nb[..., 2:5] * DISTANCE_SCALE,
+        relative_formation_error=relative,
+        obstacle_present=ob[..., 0] > 0.5,
+        obstacle_relative=ob[..., 1:3] * DISTANCE_SCALE,
+        obstacle_radius=ob[..., 3] * DISTANCE_SCALE,
+        obstacle_surface=ob[..., 4] * DISTANCE_SCALE,
+    )
+
+
+def observation_size(scenario: Scenario, n_uav: int | None = None) -> int:
+    """Length of one agent's observation under ``scenario.observation`` ("full": the layout of
+    :mod:`uav_formation_env.core.observation` for N UAVs, the scenario's N if None; "local":
+    this module's, whatever N)."""
+    config = scenario.observation
+    if config.kind == "local":
+        return local_observation_dim(config.neighbours, config.obstacles)
+    return observation_dim(scenario.n_uav if n_uav is None else n_uav)
+
+
+def observation_bounds(scenario: Scenario, n_uav: int | None = None) -> tuple[np.ndarray, ...]:
+    """(dim,) float32 lower and upper bounds of every observation slot."""
+    config = scenario.observation
+    if config.kind == "local":
+        return local_observation_bounds(config.neighbours, config.obstacles)
+    dim = observation_size(scenario, n_uav)
+    bound = np.full(dim, OBSERVATION_BOUND, dtype=np.float32)
+    return -bound, bound
