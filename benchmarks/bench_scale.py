@@ -1,0 +1,91 @@
+"""How the project scales with N (prints figures, asserts nothing).
+
+For each N (default 5, 10, 20, 50, 100: a 10 m grid with a 4-nearest graph on the paper's route
+and obstacles, :func:`~uav_formation_env.scenarios.swarm_scenario`; N = 5 is the same grid
+family, not the paper's V, so that every row is one family):
+
+* episode-layer env-steps/s at B = 1 and B = 256 with random actions (one step of all N agents,
+  observations included);
+* the reference DMPC (LFPIO) ms per control step at B = 1, and per UAV-step;
+* every figure as a ratio to N = 5 measured in the same run.
+
+    python benchmarks/bench_scale.py [--sizes 5 10 20 50 100] [--seconds 2] [--dmpc-steps 5]
+
+The issue's target is a DMPC cost per UAV-step at N = 100 within 10x of N = 5; each UAV's
+problem still includes every other UAV's zero-input rollout in its separation term (O(N) per
+UAV), which is what this benchmark shows growing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from uav_formation_env.episode import FormationEpisodes
+from uav_formation_env.policies import make_policy
+from uav_formation_env.scenarios import swarm_scenario
+
+
+def env_rate(scenario, batch: int, seconds: float) -> float:
+    """env-steps/s (copies x steps per second) of the episode layer with random actions."""
+    episodes = FormationEpisodes(scenario, batch, autoreset=True)
+    episodes.reset(seed=0)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (64, batch, scenario.n_uav, 3))
+    episodes.step(actions[0])
+    count, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        episodes.step(actions[count % 64])
+        count += 1
+    return batch * count / (time.perf_counter() - start)
+
+
+def dmpc_ms(scenario, steps: int) -> float:
+    """Milliseconds per control step of LFPIO (B = 1), after one warm-up step."""
+    episodes = FormationEpisodes(scenario, 1)
+    policy = make_policy("lfpio", scenario)
+    policy.reset(1, seeds=[0])
+    obs = episodes.reset(seed=0).observation
+    obs = episodes.step(policy.act_batch(obs)).observation
+    start = time.perf_counter()
+    for _ in range(steps):
+        obs = episodes.step(policy.act_batch(obs)).observation
+    return 1e3 * (time.perf_counter() - start) / steps
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[5, 10, 20, 50, 100])
+    parser.add_argument("--seconds", type=float, default=2.0, help="per env measurement")
+    parser.add_argument("--dmpc-steps", type=int, default=5, help="timed DMPC steps per N")
+    args = parser.parse_args()
+    rows = []
+    for n in args.sizes:
+        scenario = swarm_scenario(n)
+        rows.append(
+            (
+                n,
+                env_rate(scenario, 1, args.seconds),
+                env_rate(scenario, 256, args.seconds),
+                dmpc_ms(scenario, args.dmpc_steps),
+            )
+        )
+        print(f"measured N = {n}", flush=True)
+    base = rows[0]
+    print(
+        f"\n| N | env-steps/s B=1 | (vs N={base[0]}) | env-steps/s B=256 | (vs N={base[0]}) "
+        f"| DMPC ms/step | per UAV-step ms | (vs N={base[0]}) |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    for n, one, many, ms in rows:
+        per_uav, base_per_uav = ms / n, base[3] / base[0]
+        print(
+            f"| {n} | {one:,.0f} | {one / base[1]:.2f}x | {many:,.0f} | {many / base[2]:.2f}x "
+            f"| {ms:.1f} | {per_uav:.2f} | {per_uav / base_per_uav:.1f}x |"
+        )
+
+
+if __name__ == "__main__":
+    main()
