@@ -135,14 +135,7 @@ def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
     scenario = sim.scenario
     config = scenario.observation
     if config.kind == "local":
-        present = (
-            np.ones((sim.batch_size, sim.obstacle_radii.shape[-1]), dtype=bool)
-            if sim.obstacles is None
-            else sim.obstacles.present
-        )
-        centres = sim.obstacle_centers if sim.obstacles is None else sim.obstacles.centres
-        radii = sim.obstacle_radii if sim.obstacles is None else sim.obstacles.radii
-        batch = sim.batch_size
+        field = sim.field
         next_velocity, wait = next_leg(scenario.schedule, result.t)
         return build_local_observations(
             result.z,
@@ -152,9 +145,9 @@ def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
             result.avoiding,
             result.t / scenario.duration,
             sim.offsets,
-            np.broadcast_to(centres, (batch, *centres.shape[-2:])),
-            np.broadcast_to(radii, (batch, radii.shape[-1])),
-            present,
+            field.centres,
+            field.radii,
+            field.present,
             result.min_separation,
             k=config.neighbours,
             m=config.obstacles,

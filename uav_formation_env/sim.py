@@ -168,6 +168,7 @@ class FormationSim:
             disturbance = replace(disturbance, gust_std=max_gust_std(scenario))
             self.copy_disturbance = CopyDisturbance.of(disturbance, B)
         self.disturbance = Disturbance(disturbance, N, self.dt)
+        self._shared_field: ObstacleField | None = None  # built on first use of `field`
         self._rows = np.arange(self.batch_size)
         self._n_steps = scenario.n_steps
         # The state of every copy, declared here and (re)initialised per copy by reset().
@@ -425,6 +426,22 @@ class FormationSim:
         return self._rngs[copy]
 
     # ------------------------------------------------------------------ queries
+    @property
+    def field(self) -> ObstacleField:
+        """Every copy's obstacles as an :class:`ObstacleField` (B, O, ...): the drawn ones of a
+        scene distribution, else the scenario's, as read-only broadcast views of one row."""
+        if self.obstacles is not None:
+            return self.obstacles
+        if self._shared_field is None:
+            row = obstacle_field([self.scenario.avoidance])
+            self._shared_field = ObstacleField(
+                *(
+                    np.broadcast_to(getattr(row, f), (self.batch_size, *getattr(row, f).shape[1:]))
+                    for f in ("centres", "radii", "r_safe", "r_detect", "present")
+                )
+            )
+        return self._shared_field
+
     def distances(self, pair: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Nearest-UAV distance and nearest obstacle-surface distance, each (B, N) [m].
 

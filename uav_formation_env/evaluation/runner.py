@@ -159,10 +159,7 @@ def run_episodes(
     result, obs = step.result, step.observation
 
     def centre_min(z: np.ndarray) -> np.ndarray:
-        if sim.obstacle_radii.shape[-1] == 0:
-            return np.zeros((batch, 0))
-        field = scenario.avoidance if sim.obstacles is None else sim.obstacles
-        return obstacle_distances(z[..., :3], field).min(axis=1)
+        return obstacle_distances(z[..., :3], sim.field).min(axis=1, initial=np.inf)
 
     states = [_state_record(result, centre_min)]
     steps: list[tuple] = []
