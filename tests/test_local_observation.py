@@ -43,9 +43,16 @@ def inputs(z, adjacency, offsets=None, centres=None, radii=None, present=None, *
         "obstacle_radii": np.asarray(radii, dtype=float),
         "obstacle_present": np.asarray(present, dtype=bool),
         "min_separation": np.full((batch, n_uav), 10.0),
+        # the neighbour-slot tests: proximity slots have their own tests (test_proximity_*)
+        "nearest": 0,
     }
     kwargs.update(extra)
     return kwargs
+
+
+def decode(obs, k=4, m=2):
+    """decode_local_observations of observations built by ``inputs`` (no proximity slots)."""
+    return decode_local_observations(obs, k, m, 0)
 
 
 def random_inputs(rng, batch, n_uav, n_obs=3, grid=False):
@@ -81,10 +88,11 @@ def random_inputs(rng, batch, n_uav, n_obs=3, grid=False):
 # Layout
 # ------------------------------------------------------------------------------------------------
 def test_dim_and_bounds():
-    assert local_observation_dim(4, 2) == 73
-    assert local_observation_dim(0, 0) == 19
-    assert local_observation_dim(1, 3) == 19 + 11 + 15
-    low, high = local_observation_bounds(4, 2)
+    assert local_observation_dim(4, 2) == 95  # default r = 2 proximity slots
+    assert local_observation_dim(4, 2, 0) == 73
+    assert local_observation_dim(0, 0, 0) == 19
+    assert local_observation_dim(1, 3, 1) == 19 + 22 + 15
+    low, high = local_observation_bounds(4, 2, 0)
     assert low.shape == high.shape == (73,) and low.dtype == np.float32
     assert np.all(low < high)
     assert (low[14], high[14], low[18], high[18]) == (-10, 10, 0, 10)
@@ -101,7 +109,7 @@ def test_dim_independent_of_n(n_uav):
     assert isinstance(out, LocalObservations)
     assert out.obs.shape == (2, n_uav, 73) and out.obs.dtype == np.float32
     assert out.neighbour_index.shape == (2, n_uav, 4) and out.neighbour_index.dtype == np.int64
-    low, high = local_observation_bounds()
+    low, high = local_observation_bounds(nearest=0)
     box = gymnasium.spaces.Box(low, high, dtype=np.float32)
     assert all(box.contains(row) for row in out.obs.reshape(-1, 73))
 
@@ -157,12 +165,33 @@ def test_six_uavs_every_slot_of_uav_0():
     np.testing.assert_allclose(out.obs[0, 0], expected, **F32)
 
 
+def test_proximity_slots_show_the_nearest_non_slot_uavs():
+    # UAV 0 of the six-UAV case with k = 2: its in-neighbours 2 (20 m) and 4 (40 m) fill the
+    # neighbour slots; the proximity slots hold UAV 3 (10 m, nearer than both) and UAV 1 (30 m)
+    out = build_local_observations(**{**six_uav_case(), "nearest": 2}, k=2)
+    np.testing.assert_array_equal(out.neighbour_index[0, 0], [2, 4, 3, 1])
+    decoded = decode_local_observations(out.obs, 2, 2, 2)
+    np.testing.assert_array_equal(decoded.neighbour[0, 0], [True, True, False, False])
+    np.testing.assert_allclose(decoded.relative_position[0, 0, 2], [0, 0, 10], **F32)
+    np.testing.assert_allclose(decoded.relative_position[0, 0, 3], [30, 0, 0], **F32)
+    # UAV 1 receives from all five: neighbour slots 4 (10 m) and 0 (30 m), then by distance
+    # alone 3 (31.6 m) and 2 (36.1 m), flagged as in-neighbours
+    np.testing.assert_array_equal(out.neighbour_index[0, 1], [4, 0, 3, 2])
+    np.testing.assert_array_equal(decoded.neighbour[0, 1], [True] * 4)
+    # more proximity slots than UAVs left: absent slots are -1 and all zeros
+    wide = build_local_observations(**{**six_uav_case(), "nearest": 5}, k=2)
+    np.testing.assert_array_equal(wide.neighbour_index[0, 0], [2, 4, 3, 1, 5, -1, -1])
+    slots = wide.obs[0, 0, 19 : 19 + 11 * 7].reshape(7, 11)
+    assert not slots[5:].any()
+    assert wide.obs.shape[-1] == local_observation_dim(2, 2, 5)
+
+
 def test_six_uavs_other_receivers():
     out = build_local_observations(**six_uav_case())
     # UAV 1 receives from all: the 4 nearest of its 5 in-neighbours, all flagged 1
     # (distances from (30, 0, 0): UAV 4 10, UAV 0 30, UAV 3 31.6, UAV 2 36.1, UAV 5 58.3)
     np.testing.assert_array_equal(out.neighbour_index[0, 1], [4, 0, 3, 2])
-    decoded = decode_local_observations(out.obs)
+    decoded = decode(out.obs)
     np.testing.assert_array_equal(decoded.neighbour[0, 1], [True] * 4)
     # UAV 3 has no in-neighbour: the 4 nearest other UAVs, flagged 0, ties to the lowest index
     # (from (0, 0, 10): UAV 0 10, UAV 2 22.4, UAV 1 31.6, UAV 4 41.2, UAV 5 51.0)
@@ -192,7 +221,7 @@ def test_more_than_k_neighbours_keeps_the_k_nearest():
     z[0, 1:, 0] = [60, 10, 50, 20, 40, 30]  # UAVs 1..6 on a line, at these distances from 0
     out = build_local_observations(**inputs(z, 1 - np.eye(n_uav)), k=4)
     np.testing.assert_array_equal(out.neighbour_index[0, 0], [2, 4, 6, 5])
-    np.testing.assert_array_equal(decode_local_observations(out.obs).neighbour[0, 0], True)
+    np.testing.assert_array_equal(decode(out.obs).neighbour[0, 0], True)
     k2 = build_local_observations(**inputs(z, 1 - np.eye(n_uav)), k=2, m=0)
     assert k2.obs.shape == (1, n_uav, 19 + 22)
     np.testing.assert_array_equal(k2.neighbour_index[0, 0], [2, 4])
@@ -240,17 +269,21 @@ def test_distances_are_ranked_exactly():
 # ------------------------------------------------------------------------------------------------
 # Selection against a loop reference
 # ------------------------------------------------------------------------------------------------
-def reference_slots(kwargs, k, m):
-    """Per (b, i): the neighbour slots' UAVs and the obstacle slots' obstacles, by Python loops."""
+def reference_slots(kwargs, k, m, nearest=0):
+    """Per (b, i): the neighbour then proximity slots' UAVs and the obstacle slots' obstacles, by
+    Python loops."""
     z, adjacency = kwargs["z"], kwargs["adjacency"]
     batch, n_uav = z.shape[:2]
-    neighbours = np.full((batch, n_uav, k), -1)
+    neighbours = np.full((batch, n_uav, k + nearest), -1)
     obstacles = np.full((batch, n_uav, m), -1)
     for b in range(batch):
         for i in range(n_uav):
             dist = {j: math.dist(z[b, i, :3], z[b, j, :3]) for j in range(n_uav) if j != i}
             order = sorted(dist, key=lambda j: (adjacency[b, i, j] == 0, dist[j], j))[:k]
+            rest = sorted((j for j in dist if j not in order), key=lambda j: (dist[j], j))
             neighbours[b, i, : len(order)] = order
+            near = rest[:nearest]
+            neighbours[b, i, k : k + len(near)] = near
             surface = {
                 o: math.dist(z[b, i, :2], kwargs["obstacle_centers"][b, o])
                 - kwargs["obstacle_radii"][b, o]
@@ -266,12 +299,13 @@ def reference_slots(kwargs, k, m):
 def test_selection_matches_loop_reference(seed):
     rng = np.random.default_rng(seed)
     n_uav, n_obs = int(rng.integers(1, 14)), int(rng.integers(0, 6))
-    k, m = int(rng.integers(0, 7)), int(rng.integers(0, 4))
+    k, m, r = int(rng.integers(0, 7)), int(rng.integers(0, 4)), int(rng.integers(0, 3))
     kwargs = random_inputs(rng, 3, n_uav, n_obs, grid=seed % 2 == 0)  # even seeds: many ties
+    kwargs["nearest"] = r
     out = build_local_observations(**kwargs, k=k, m=m)
-    neighbours, obstacles = reference_slots(kwargs, k, m)
+    neighbours, obstacles = reference_slots(kwargs, k, m, r)
     np.testing.assert_array_equal(out.neighbour_index, neighbours)
-    decoded = decode_local_observations(out.obs, k, m)
+    decoded = decode_local_observations(out.obs, k, m, r)
     np.testing.assert_array_equal(decoded.slot_present, neighbours >= 0)
     np.testing.assert_array_equal(decoded.obstacle_present, obstacles >= 0)
     z, offsets = kwargs["z"], kwargs["offsets"]
@@ -304,7 +338,7 @@ def test_obstacles_nearest_first_padding_masked_whatever_its_values():
     kwargs = inputs(z, np.zeros((2, 2)), centres=centres, radii=radii, present=present)
     with np.errstate(all="raise"):  # padding never enters the arithmetic
         out = build_local_observations(**kwargs, m=3)
-    decoded = decode_local_observations(out.obs, 4, 3)
+    decoded = decode(out.obs, 4, 3)
     # copy 0, UAV 0: obstacle 1 (surface 20 m), then obstacle 3 (50 m); 2 present -> slot 2 absent
     np.testing.assert_array_equal(decoded.obstacle_present[0, 0], [True, True, False])
     np.testing.assert_allclose(decoded.obstacle_relative[0, 0], [(0, 30), (0, -60), (0, 0)])
@@ -334,12 +368,12 @@ def test_next_leg_defaults_and_clipping():
     kwargs = random_inputs(np.random.default_rng(3), 2, 4)
     del kwargs["next_velocity"], kwargs["time_to_switch"]
     out = build_local_observations(**kwargs)
-    decoded = decode_local_observations(out.obs)
+    decoded = decode(out.obs)
     np.testing.assert_allclose(decoded.next_velocity, kwargs["reference_velocity"], rtol=1e-6)
     np.testing.assert_array_equal(decoded.time_to_switch, 0.0)
     kwargs["next_velocity"] = np.array([[1.0, 2.0, 3.0], [-4.0, 0.0, 0.5]])
     kwargs["time_to_switch"] = np.array([1e4, -3.0])  # clipped to [0, 500] s
-    decoded = decode_local_observations(build_local_observations(**kwargs).obs)
+    decoded = decode(build_local_observations(**kwargs).obs)
     np.testing.assert_allclose(
         decoded.next_velocity, np.repeat(kwargs["next_velocity"][:, None], 4, 1), rtol=1e-6
     )
@@ -349,7 +383,7 @@ def test_next_leg_defaults_and_clipping():
 def test_decode_inverts_build():
     kwargs = random_inputs(np.random.default_rng(7), 3, 9, n_obs=4)
     out = build_local_observations(**kwargs)
-    d = decode_local_observations(out.obs)
+    d = decode(out.obs)
     z = kwargs["z"]
     tol = {"rtol": 1e-6, "atol": 1e-5}
     np.testing.assert_allclose(d.velocity, z[..., 3:], **tol)
@@ -403,7 +437,7 @@ def test_decode_inverts_build():
     )
     np.testing.assert_allclose(again, out.obs, rtol=1e-6, atol=1e-7)
     with pytest.raises(ValueError, match="last axis"):
-        decode_local_observations(out.obs, k=3)
+        decode(out.obs, k=3)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -431,7 +465,7 @@ def test_paper_graph_matches_full_observation(mirrored):
         kwargs["min_separation"],
         mirrored=mirrored,
     )
-    ours, theirs = decode_local_observations(local.obs), decode_observations(full, 5)
+    ours, theirs = decode(local.obs), decode_observations(full, 5)
     np.testing.assert_allclose(ours.velocity, theirs.velocity, rtol=1e-6)
     np.testing.assert_allclose(ours.estimate, theirs.estimate, rtol=1e-6)
     adjacency = np.asarray(PAPER_ADJACENCY)
@@ -455,11 +489,13 @@ def test_batch_copies_are_independent():
     rng = np.random.default_rng(5)
     kwargs = random_inputs(rng, 5, 8, n_obs=4, grid=True)
     kwargs["offsets"] = rng.normal(size=(5, 8, 6)) * 20  # one formation per copy
-    batch = build_local_observations(**kwargs)
+    del kwargs["nearest"]  # with the default proximity slots
+    batch = build_local_observations(**kwargs, k=2)
+    assert (batch.neighbour_index[..., 2:] >= 0).all()  # the proximity slots are in use
     for b in range(5):
         alone = {key: value[b : b + 1] for key, value in kwargs.items()}
         alone["offsets"] = kwargs["offsets"][b]  # (N, 6), shared by a batch of one
-        single = build_local_observations(**alone)
+        single = build_local_observations(**alone, k=2)
         np.testing.assert_array_equal(single.obs[0], batch.obs[b])
         np.testing.assert_array_equal(single.neighbour_index[0], batch.neighbour_index[b])
 

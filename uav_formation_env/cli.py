@@ -141,45 +141,59 @@ def _evaluate(args: argparse.Namespace) -> int:
     from uav_formation_env.evaluation import (
         json_ready,
         make_policy,
-        run_episodes,
-        summarise,
+        run_episode_groups,
+        summarise_groups,
         write_json,
         write_records,
     )
     from uav_formation_env.plotting import plot_trajectories
+    from uav_formation_env.scenes import n_uav_range
 
     scenario = _scenario_for(args)
     seeds = _seeds(args)
     out = _out_dir(args.out)
     desc = f"evaluate {Path(args.policy).name} x {len(seeds)} seeds"
+    low, high = n_uav_range(scenario)
     if args.backend == "ray":
         from uav_formation_env.distributed import ray_session, run_episodes_ray
 
+        if low != high:
+            raise ValueError(
+                f"--backend ray: scenario {scenario.name!r} draws N in {low}..{high}, which the "
+                "Ray runner does not split by N yet; use --backend local"
+            )
         make_policy(args.policy, scenario, algo=args.algo)  # bad names fail here, not in a task
         with ray_session(args.address):
-            batch = run_episodes_ray(
-                scenario,
-                args.policy,
-                seeds,
-                algo=args.algo,
-                chunk_size=args.chunk_size,
-                progress=not args.quiet,
-                desc=desc + " (ray)",
-            )
+            batches = [
+                run_episodes_ray(
+                    scenario,
+                    args.policy,
+                    seeds,
+                    algo=args.algo,
+                    chunk_size=args.chunk_size,
+                    progress=not args.quiet,
+                    desc=desc + " (ray)",
+                )
+            ]
     else:
         policy = make_policy(args.policy, scenario, algo=args.algo)
-        batch = run_episodes(
+        batches = run_episode_groups(
             scenario, policy, seeds, policy_name=args.policy, progress=not args.quiet, desc=desc
         )
-    summary = json_ready(summarise(batch))
-    write_records(batch, out / "records.csv")
+    summary = json_ready(summarise_groups(batches))
+    records = []
+    for batch in batches:  # one table per N: its rows are per UAV
+        name = "records.csv" if len(batches) == 1 else f"records_n{batch.z.shape[2]}.csv"
+        write_records(batch, out / name)
+        records.append(out / name)
     write_json(summary, out / "summary.json")
+    batch = batches[0]
     plot_trajectories(
         batch.z[:, 0, :, :3],
         scenario if batch.scenes is None else batch.scenes[0],  # the first seed's drawn scene
         out / "trajectories.png",
         title=f"{args.policy}, observer {'on' if scenario.observer.enabled else 'off'}, "
-        f"seed {seeds[0]}",
+        f"seed {batch.seeds[0]}",
     )
     observer = "on" if scenario.observer.enabled else "off"
     print(
@@ -190,7 +204,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         print(f"  {line}")
     if summary["triggers_mean"] is not None:
         print(f"  event-triggered steps per UAV: {summary['triggers_mean']:.1f}")
-    print(f"wrote {out / 'records.csv'}, {out / 'summary.json'}, {out / 'trajectories.png'}")
+    written = [*records, out / "summary.json", out / "trajectories.png"]
+    print(f"wrote {', '.join(str(path) for path in written)}")
     return 0
 
 

@@ -67,6 +67,7 @@ __all__ = [
     "global_state",
     "observation_bounds",
     "observation_size",
+    "encode_observations",
     "observations_of",
     "validate_action",
     "validate_actions",
@@ -131,13 +132,26 @@ def validate_actions(actions: Any, agents: list[str]) -> np.ndarray:
 
 
 def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
-    """(B, N, dim) float32 observations of a sim step, the one place they are encoded."""
+    """(B, N, dim) float32 observations of a sim step (see :func:`encode_observations`)."""
+    return encode_observations(sim, result)[0]
+
+
+def encode_observations(
+    sim: FormationSim, result: StepResult
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The observations of a sim step, the one place they are encoded.
+
+    Returns:
+        ``(obs, neighbour_index)``: (B, N, dim) float32 observations and, for the local layout,
+        the (B, N, k) UAV in each neighbour slot (-1 where absent; who UAV i exchanges plans
+        with), else None.
+    """
     scenario = sim.scenario
     config = scenario.observation
     if config.kind == "local":
         field = sim.field
         next_velocity, wait = next_leg(scenario.schedule, result.t)
-        return build_local_observations(
+        local = build_local_observations(
             result.z,
             result.reference_velocity,
             result.estimate,
@@ -151,11 +165,13 @@ def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
             result.min_separation,
             k=config.neighbours,
             m=config.obstacles,
+            nearest=config.nearest,
             mirrored=scenario.formation.mirrored_offsets,
             next_velocity=next_velocity,
             time_to_switch=wait,
-        ).obs
-    return build_observations(
+        )
+        return local.obs, local.neighbour_index
+    full = build_observations(
         result.z,
         result.reference_velocity,
         result.estimate,
@@ -169,6 +185,7 @@ def observations_of(sim: FormationSim, result: StepResult) -> np.ndarray:
         scenario.formation.mirrored_offsets,
         None if sim.obstacles is None else sim.obstacles.present,
     )
+    return full, None
 
 
 def global_state(sim: FormationSim, result: StepResult) -> np.ndarray:
@@ -207,6 +224,9 @@ class EpisodeStep:
     result: StepResult
     final_observation: np.ndarray | None = None  # (B, N, dim) where autoreset, else None
     reset: np.ndarray | None = None  # (B,) bool: copies reset after this step (autoreset)
+    # (B, N, k) the UAV in each neighbour slot of the local layout (-1: absent), for policies
+    # that exchange plans (act_batch(obs, neighbour_index)); None for the full layout
+    neighbour_index: np.ndarray | None = None
 
     @property
     def collided(self) -> np.ndarray:
@@ -278,8 +298,9 @@ class FormationEpisodes:
         if starts.any():
             result = self._fly_to(starts)
         zero, no = self._no_penalty, self._no_copy  # a reset rewards nothing and ends nothing
+        obs, neighbour_index = encode_observations(self.sim, result)
         step = EpisodeStep(
-            observation=observations_of(self.sim, result),
+            observation=obs,
             reward=zero,
             cost=zero,
             penalty=zero,
@@ -288,6 +309,7 @@ class FormationEpisodes:
             left_corridor=no,
             diverged=no,
             result=result,
+            neighbour_index=neighbour_index,
         )
         self.last = step
         return step
@@ -341,8 +363,9 @@ class FormationEpisodes:
             truncated = (result.truncated | diverged) & ~terminated
         else:  # only the duration ends episodes
             truncated = result.truncated
+        obs, neighbour_index = encode_observations(self.sim, result)
         step = EpisodeStep(
-            observation=observations_of(self.sim, result),
+            observation=obs,
             reward=self.reward(cost, penalty),
             cost=cost,
             penalty=penalty,
@@ -351,12 +374,17 @@ class FormationEpisodes:
             left_corridor=left,
             diverged=diverged,
             result=result,
+            neighbour_index=neighbour_index,
         )
         if self.autoreset and (done := step.done).any():
             step.final_observation = step.observation
             step.reset = done
             fresh = self.reset(seed=None, mask=done)
             step.observation = np.where(done[:, None, None], fresh.observation, step.observation)
+            if neighbour_index is not None:
+                step.neighbour_index = np.where(
+                    done[:, None, None], fresh.neighbour_index, neighbour_index
+                )
         self.last = step
         return step
 

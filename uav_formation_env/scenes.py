@@ -24,6 +24,7 @@ Nothing is drawn for a scenario without a scene: it is returned as it is.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -52,6 +53,8 @@ __all__ = [
     "max_obstacles",
     "n_uav_range",
     "route_polyline",
+    "scene_of_seed",
+    "seeds_by_n_uav",
 ]
 
 MAX_TRIES = 1000  # placements tried per obstacle before the field is given up as too crowded
@@ -277,3 +280,26 @@ def draw_scene(scenario: Scenario, rng: np.random.Generator) -> Scenario:
         avoidance=avoidance,
         scene=None,
     )
+
+
+def scene_of_seed(scenario: Scenario, seed: int) -> tuple[Scenario, np.random.Generator]:
+    """The scene a reset with episode seed ``seed`` draws, and the copy's generator after it.
+
+    The one rule of what a seed names: the copy's generator is ``default_rng(seed)``; the scene
+    is drawn from it first, then the start positions, gusts and noise
+    (:meth:`~uav_formation_env.sim.FormationSim.reset`).
+    """
+    rng = np.random.default_rng(seed)
+    return draw_scene(scenario, rng), rng
+
+
+def seeds_by_n_uav(scenario: Scenario, seeds: Sequence[int]) -> dict[int, list[int]]:
+    """The seeds grouped by the N of the scene each draws, groups in ascending N (one group for
+    a scenario of one N): a simulator has one N, so a distribution over N runs one per group."""
+    low, high = n_uav_range(scenario)
+    if low == high:
+        return {low: list(seeds)}
+    groups: dict[int, list[int]] = {}
+    for seed in seeds:
+        groups.setdefault(scene_of_seed(scenario, seed)[0].n_uav, []).append(seed)
+    return dict(sorted(groups.items()))

@@ -39,7 +39,7 @@ from uav_formation_env.core.observer import (
     observer_step_held,
 )
 from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
-from uav_formation_env.scenes import draw_scene, max_gust_std, max_obstacles, n_uav_range
+from uav_formation_env.scenes import max_gust_std, max_obstacles, n_uav_range, scene_of_seed
 from uav_formation_env.seeding import check_seed
 
 NOISE_BLOCK = 100  # control steps of disturbance noise drawn per Generator call
@@ -221,8 +221,7 @@ class FormationSim:
             elif stream is not None:
                 stream = copy.deepcopy(stream)
                 s = int(stream.integers(2**63))
-            rng = np.random.default_rng(s)
-            scene = draw_scene(cfg, rng)
+            scene, rng = scene_of_seed(cfg, s)
             if scene.n_uav != N:
                 raise ValueError(
                     f"seed {s} draws a scene of {scene.n_uav} UAVs for copy {b}, but this "

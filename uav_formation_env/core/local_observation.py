@@ -3,7 +3,7 @@
 :mod:`uav_formation_env.core.observation` gives every other UAV a slot, so its length grows with N
 and a policy trained at one N cannot act at another. Here UAV i sees its own state, its ``k``
 nearest in-neighbours (then the nearest other UAVs) and its ``m`` nearest obstacles, so the
-length is ``dim = 19 + 11 k + 5 m`` (73 for the defaults k = 4, m = 2) for any N:
+length is ``dim = 19 + 11 (k + r) + 5 m`` (95 for the defaults k = 4, r = 2, m = 2) for any N:
 
 | slot | size | meaning | unit | scale |
 |---|---|---|---|---|
@@ -26,8 +26,8 @@ length is ``dim = 19 + 11 k + 5 m`` (73 for the defaults k = 4, m = 2) for any N
 | o+3 | 1 | obstacle radius | m | / 100, in [0, 100] |
 | o+4 | 1 | distance to the obstacle's surface (< 0 inside) | m | / 100, clipped ±10 |
 
-with n = 19 + 11 s for neighbour slot s = 0..k-1 and o = 19 + 11 k + 5 q for obstacle slot
-q = 0..m-1 (k = 4, m = 2: neighbour slots at 19, 30, 41, 52; obstacle slots at 63, 68).
+with n = 19 + 11 s for UAV slot s = 0..k+r-1 and o = 19 + 11 (k + r) + 5 q for obstacle slot
+q = 0..m-1 (k = 4, r = 2, m = 2: UAV slots at 19, 30, 41, 52, 63, 74; obstacle slots at 85, 90).
 
 Every other scaled value is clipped to ±100 (only reached far off course); the scales are those of
 :mod:`~uav_formation_env.core.observation`. Absent slots are all zeros.
@@ -38,10 +38,18 @@ separation term and collision avoidance concern every sensed UAV, not only the n
 beyond N - 1 are absent. With more than k in-neighbours the policy sees only the k nearest of them
 (the cost J_i still sums over all). Equal distances are broken by the lowest index j.
 
+Proximity slots (s = k..k+r-1, the same 11 values): the r nearest other UAVs that are not in a
+neighbour slot, by distance alone (their flag says whether they are in-neighbours too). A UAV
+with k or more in-neighbours would otherwise not see a non-neighbour that comes close, and the
+separation term and collision avoidance need it.
+
 Defaults: k = 4 because the paper's graph (``config.PAPER_ADJACENCY``) has in-degree at most 4, so
 at N = 5 every other UAV has a slot and nothing of the paper's J_i is lost; the k-nearest formation
 graphs (``formations.k_nearest_adjacency``) also use k = 4 (symmetrising can add in-neighbours, of
-which the 4 nearest are seen). m = 2: the obstacle being avoided and the next one.
+which the 4 nearest are seen). r = 2: with r = 0, LFPIO acting on this layout collided UAV with
+UAV on 5 of 6 ``random_swarm`` seeds (all slots held neighbours, and a crossing non-neighbour was
+invisible); with r = 2 none did (``docs/scenarios.md``). m = 2: the obstacle being avoided and
+the next one.
 """
 
 from __future__ import annotations
@@ -73,22 +81,24 @@ _TOP = np.uint64(1 << 63)  # group bit of the neighbour sort key (see _neighbour
 _SELF = np.uint64(np.iinfo(np.uint64).max)
 
 
-def _check_slots(k: int, m: int) -> None:
-    for name, value in (("k", k), ("m", m)):
+def _check_slots(k: int, m: int, nearest: int = 0) -> None:
+    for name, value in (("k", k), ("m", m), ("nearest", nearest)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
             raise ValueError(f"{name} must be an integer >= 0, got {value!r}")
 
 
-def local_observation_dim(k: int, m: int) -> int:
-    """Length of one agent's local observation with k neighbour and m obstacle slots."""
-    _check_slots(k, m)
-    return OWN_DIM + NEIGHBOUR_DIM * k + OBSTACLE_DIM * m
+def local_observation_dim(k: int, m: int, nearest: int = 2) -> int:
+    """Length of one agent's local observation with k neighbour slots, ``nearest`` proximity
+    slots and m obstacle slots."""
+    _check_slots(k, m, nearest)
+    return OWN_DIM + NEIGHBOUR_DIM * (k + nearest) + OBSTACLE_DIM * m
 
 
 @lru_cache(maxsize=16)
 def _layout(k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(scale, low, high)``, each (dim,): every slot's divisor and clip bounds (read-only)."""
-    dim = local_observation_dim(k, m)
+    """``(scale, low, high)``, each (dim,) for k UAV slots (neighbour and proximity slots alike)
+    and m obstacle slots: every slot's divisor and clip bounds (read-only)."""
+    dim = local_observation_dim(k, m, 0)
     scale = np.ones(dim)
     high = np.full(dim, OBSERVATION_BOUND)
     low = -high
@@ -117,10 +127,13 @@ def _layout(k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return scale, low, high
 
 
-def local_observation_bounds(k: int = 4, m: int = 2) -> tuple[np.ndarray, np.ndarray]:
+def local_observation_bounds(
+    k: int = 4, m: int = 2, nearest: int = 2
+) -> tuple[np.ndarray, np.ndarray]:
     """``(low, high)``, each (dim,) float32: the clip bounds of every slot, e.g. for a
     ``gymnasium.spaces.Box(low, high, dtype=np.float32)``."""
-    _, low, high = _layout(k, m)
+    _check_slots(k, m, nearest)
+    _, low, high = _layout(k + nearest, m)
     return low.astype(np.float32), high.astype(np.float32)
 
 
@@ -219,6 +232,7 @@ def build_local_observations(
     mirrored: bool = False,
     next_velocity: np.ndarray | None = None,
     time_to_switch: np.ndarray | None = None,
+    nearest: int = 2,
 ) -> LocalObservations:
     """Every agent's local observation (length independent of N).
 
@@ -240,17 +254,20 @@ def build_local_observations(
         next_velocity: (B, 3) preset velocity of the route's next leg [m/s]; None: each UAV's
             current reference (no change ahead).
         time_to_switch: (B,) time until the next leg starts [s]; None: 0.
+        nearest: proximity slots after the k neighbour slots, >= 0: the nearest UAVs not in a
+            neighbour slot.
 
     Returns:
-        :class:`LocalObservations` with obs (B, N, dim) and neighbour_index (B, N, k).
+        :class:`LocalObservations` with obs (B, N, dim) and neighbour_index (B, N, k + nearest).
     """
-    _check_slots(k, m)
+    _check_slots(k, m, nearest)
     batch, n_uav = z.shape[:2]
-    scale, low, high = _layout(k, m)
-    end = OWN_DIM + NEIGHBOUR_DIM * k
+    slots_count = k + nearest
+    scale, low, high = _layout(slots_count, m)
+    end = OWN_DIM + NEIGHBOUR_DIM * slots_count
     # Raw values into one array, then one division by the slot scales and one clip to the slot
     # bounds (as core.observation): absent slots stay exactly 0.
-    raw = np.empty((batch, n_uav, local_observation_dim(k, m)))
+    raw = np.empty((batch, n_uav, local_observation_dim(k, m, nearest)))
     v = z[..., 3:]
     raw[..., 0:3] = v
     np.subtract(v, reference_velocity, out=raw[..., 3:6])
@@ -262,17 +279,26 @@ def build_local_observations(
     raw[..., 15:18] = reference_velocity if next_velocity is None else next_velocity[:, None]
     raw[..., 18] = 0.0 if time_to_switch is None else np.asarray(time_to_switch)[:, None]
 
-    # neighbour slots
-    key = _neighbour_keys(pair_distances(z[..., :3]), adjacency)
+    # neighbour slots, then proximity slots
+    distance = pair_distances(z[..., :3])
+    key = _neighbour_keys(distance, adjacency)
     index = _k_smallest(key, k)  # (B, N, min(k, N)); the UAV itself only in column N - 1
-    neighbour_index = np.full((batch, n_uav, k), -1, dtype=np.int64)
+    neighbour_index = np.full((batch, n_uav, slots_count), -1, dtype=np.int64)
     filled = min(k, n_uav - 1)
     neighbour_index[..., :filled] = index[..., :filled]
+    if nearest and n_uav - 1 > filled:
+        # the nearest UAVs not in a neighbour slot, by distance alone: the ones a collision
+        # can come from, whatever the graph (the UAV itself and the taken ones sort last)
+        near_key = _neighbour_keys(distance, np.ones_like(adjacency))
+        rows = np.arange(batch * n_uav).reshape(batch, n_uav, 1) * n_uav
+        near_key.reshape(-1)[(rows + index[..., :filled]).ravel()] = _SELF
+        extra = min(nearest, n_uav - 1 - filled)
+        neighbour_index[..., k : k + extra] = _k_smallest(near_key, extra)
     present = neighbour_index >= 0
     safe = np.where(present, neighbour_index, 0)
     flat = safe + (np.arange(batch) * n_uav)[:, None, None]  # into the (B·N) flattening
     a = anchored(z, np.asarray(offsets, dtype=float), mirrored)  # (B, N, 6)
-    slots = raw[..., OWN_DIM:end].reshape(batch, n_uav, k, NEIGHBOUR_DIM)  # a view
+    slots = raw[..., OWN_DIM:end].reshape(batch, n_uav, slots_count, NEIGHBOUR_DIM)  # a view
     slots[..., 0] = present
     slots[..., 1] = (_take_rows(adjacency, safe) != 0) & present
     np.subtract(z[..., :3].reshape(-1, 3)[flat], z[:, :, None, :3], out=slots[..., 2:5])
@@ -320,31 +346,50 @@ class DecodedLocalObservation:
     nearest_distance: np.ndarray  # (...) nearest other UAV [m] (clipped at 1000 m)
     next_velocity: np.ndarray  # (..., 3) [m/s]
     time_to_switch: np.ndarray  # (...) [s] (clipped at 500 s)
-    slot_present: np.ndarray  # (..., k) bool
-    neighbour: np.ndarray  # (..., k) bool, h_ij of the UAV in each slot
-    relative_position: np.ndarray  # (..., k, 3) p_j - p_i [m] (clipped at ±1000 m)
-    relative_formation_error: np.ndarray  # (..., k, 6) a_j - a_i [m, m/s]
+    # UAV slots: S = k neighbour slots, then the proximity slots
+    slot_present: np.ndarray  # (..., S) bool
+    neighbour: np.ndarray  # (..., S) bool, h_ij of the UAV in each slot
+    relative_position: np.ndarray  # (..., S, 3) p_j - p_i [m] (clipped at ±1000 m)
+    relative_formation_error: np.ndarray  # (..., S, 6) a_j - a_i [m, m/s]
     obstacle_present: np.ndarray  # (..., m) bool
     obstacle_relative: np.ndarray  # (..., m, 2) centre - own position [m] (clipped at ±1000 m)
     obstacle_radius: np.ndarray  # (..., m) [m]
     obstacle_surface: np.ndarray  # (..., m) [m] (clipped at ±1000 m)
+    # (..., k) the UAV in each slot, -1 where absent: communication metadata that comes with the
+    # observation (whose broadcast plan is whose), None if not given
+    neighbour_index: np.ndarray | None = None
 
 
-def decode_local_observations(obs: np.ndarray, k: int = 4, m: int = 2) -> DecodedLocalObservation:
+def decode_local_observations(
+    obs: np.ndarray,
+    k: int = 4,
+    m: int = 2,
+    nearest: int = 2,
+    *,
+    neighbour_index: np.ndarray | None = None,
+) -> DecodedLocalObservation:
     """Undo the scaling of :func:`build_local_observations` (the unclipped slots exactly).
+
+    Neighbour and proximity slots decode alike: the UAV slot arrays have k + nearest entries.
 
     Args:
         obs: (..., dim) observations.
         k: neighbour slots they were built with.
         m: obstacle slots they were built with.
+        nearest: proximity slots they were built with.
+        neighbour_index: (..., k + nearest) ints, :attr:`LocalObservations.neighbour_index` of
+            the same step (kept as given; needed by policies that exchange plans).
     """
-    dim = local_observation_dim(k, m)
+    dim = local_observation_dim(k, m, nearest)
     obs = np.asarray(obs, dtype=float)
     if obs.shape[-1] != dim:
-        raise ValueError(f"expected a last axis of {dim} (k={k}, m={m}), got {obs.shape}")
+        raise ValueError(
+            f"expected a last axis of {dim} (k={k}, m={m}, nearest={nearest}), got {obs.shape}"
+        )
     lead = obs.shape[:-1]
-    end = OWN_DIM + NEIGHBOUR_DIM * k
-    nb = obs[..., OWN_DIM:end].reshape(*lead, k, NEIGHBOUR_DIM)
+    slots = k + nearest
+    end = OWN_DIM + NEIGHBOUR_DIM * slots
+    nb = obs[..., OWN_DIM:end].reshape(*lead, slots, NEIGHBOUR_DIM)
     ob = obs[..., end:].reshape(*lead, m, OBSTACLE_DIM)
     relative = np.concatenate(
         (nb[..., 5:8] * FORMATION_SCALE, nb[..., 8:11] * VELOCITY_SCALE), axis=-1
@@ -367,6 +412,66 @@ def decode_local_observations(obs: np.ndarray, k: int = 4, m: int = 2) -> Decode
         obstacle_relative=ob[..., 1:3] * DISTANCE_SCALE,
         obstacle_radius=ob[..., 3] * DISTANCE_SCALE,
         obstacle_surface=ob[..., 4] * DISTANCE_SCALE,
+        neighbour_index=(
+            None if neighbour_index is None else _checked_index(neighbour_index, obs, slots)
+        ),
+    )
+
+
+def _checked_index(neighbour_index: np.ndarray, obs: np.ndarray, k: int) -> np.ndarray:
+    index = np.asarray(neighbour_index)
+    if index.shape != (*obs.shape[:-1], k) or index.dtype.kind not in "iu":
+        raise ValueError(
+            f"neighbour_index must be integers of shape {(*obs.shape[:-1], k)}, got "
+            f"{index.dtype} {index.shape}"
+        )
+    return index.astype(np.int64)
+
+
+ABSENT_DISTANCE = 1e6  # where an absent slot's UAV is put in a slot frame: never within reach [m]
+
+
+@dataclass(frozen=True)
+class SlotFrame:
+    """UAV i's own-frame picture of the UAVs in its slots, from its local observation alone.
+
+    The frame puts UAV i at position 0 with formation offset 0; the UAV in slot s then has the
+    state ``(p_j - p_i, v_i + (a_j - a_i)_v)`` and the offset ``z_j - a_j`` relative to i's, so
+    that anchored differences ``a_j - a_i`` and relative positions are exactly the observed ones
+    (velocities exactly when the formation's velocity offsets are equal, as in every shape of
+    :mod:`uav_formation_env.formations`). Absent slots sit at :data:`ABSENT_DISTANCE`.
+
+    Attributes:
+        own: (..., 6) UAV i's state: position 0, own velocity [m, m/s].
+        slots: (..., k, 6) the slots' states [m, m/s].
+        slot_offsets: (..., k, 6) the slots' formation offsets relative to UAV i's [m, m/s].
+        adjacency: (..., k) h_ij of the UAV in each slot (0 where absent).
+        present: (..., k) 1 where the slot holds a UAV.
+    """
+
+    own: np.ndarray
+    slots: np.ndarray
+    slot_offsets: np.ndarray
+    adjacency: np.ndarray
+    present: np.ndarray
+
+
+def slot_frame(decoded: DecodedLocalObservation) -> SlotFrame:
+    """The :class:`SlotFrame` of decoded local observations (leading dims kept)."""
+    velocity = decoded.velocity
+    own = np.concatenate((np.zeros_like(velocity), velocity), axis=-1)
+    present = decoded.slot_present
+    error = decoded.relative_formation_error  # (..., k, 6) a_j - a_i
+    position = np.where(present[..., None], decoded.relative_position, ABSENT_DISTANCE)
+    slots = np.concatenate((position, velocity[..., None, :] + error[..., 3:]), axis=-1)
+    slot_offsets = np.zeros_like(slots)
+    slot_offsets[..., :3] = position - error[..., :3]
+    return SlotFrame(
+        own=own,
+        slots=slots,
+        slot_offsets=slot_offsets,
+        adjacency=(decoded.neighbour & present).astype(float),
+        present=present.astype(float),
     )
 
 
@@ -376,7 +481,7 @@ def observation_size(scenario: Scenario, n_uav: int | None = None) -> int:
     this module's, whatever N)."""
     config = scenario.observation
     if config.kind == "local":
-        return local_observation_dim(config.neighbours, config.obstacles)
+        return local_observation_dim(config.neighbours, config.obstacles, config.nearest)
     return observation_dim(scenario.n_uav if n_uav is None else n_uav)
 
 
@@ -384,7 +489,7 @@ def observation_bounds(scenario: Scenario, n_uav: int | None = None) -> tuple[np
     """(dim,) float32 lower and upper bounds of every observation slot."""
     config = scenario.observation
     if config.kind == "local":
-        return local_observation_bounds(config.neighbours, config.obstacles)
+        return local_observation_bounds(config.neighbours, config.obstacles, config.nearest)
     dim = observation_size(scenario, n_uav)
     bound = np.full(dim, OBSERVATION_BOUND, dtype=np.float32)
     return -bound, bound

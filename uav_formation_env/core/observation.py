@@ -186,28 +186,25 @@ class DecodedObservation:
     relative_formation_error: np.ndarray  # (..., N-1, 6) a_j - a_i [m, m/s]
 
 
-def require_full_layout(scenario, policy: str) -> None:
+def require_decodable(scenario, policy: str) -> None:
     """Refuse, naming the option, a scenario whose observations ``policy`` cannot decode.
 
-    The reference DMPC and the heuristic decode the full layout above and read the mission
-    data (formation offsets, schedule) from the scenario; a scene that draws the formation per
-    reset, or the N-independent layout, is not decodable by them yet.
+    The reference DMPC and the heuristic decode the full layout above with the mission data
+    (formation offsets) of the scenario, or the N-independent local layout
+    (:mod:`uav_formation_env.core.local_observation`), which carries the relative offsets itself.
+    A scene that draws the formation per reset needs the local layout.
 
     Args:
         scenario: a :class:`~uav_formation_env.config.Scenario`.
         policy: the policy's name, for the message.
     """
-    if scenario.observation.kind != "full":
-        raise ValueError(
-            f"{policy} decodes observation.kind='full', but scenario {scenario.name!r} uses "
-            f"{scenario.observation.kind!r}"
-        )
     scene = scenario.scene
-    if scene is not None and (scene.n_uav is not None or scene.shapes is not None):
+    drawn = scene is not None and (scene.n_uav is not None or scene.shapes is not None)
+    if scenario.observation.kind == "full" and drawn:
         raise ValueError(
-            f"{policy} reads the formation from the scenario, but scenario {scenario.name!r} "
-            "draws it per reset (scene.n_uav / scene.shapes); run it on a drawn scene "
-            "(uav_formation_env.scenes.draw_scene) instead"
+            f"{policy} reads the formation of the full observation from the scenario, but "
+            f"scenario {scenario.name!r} draws it per reset (scene.n_uav / scene.shapes); use "
+            "observation.kind='local'"
         )
 
 

@@ -320,6 +320,16 @@ class UAVFormationParallelEnv(ParallelEnv):
             self._neighbour_cache[key] = names
         return names
 
+    @property
+    def neighbour_index(self) -> np.ndarray | None:
+        """(N, k) the agent index in each neighbour slot of the local observation (-1: absent),
+        for policies that exchange plans with them (``NashDMPCPolicy.act(obs, neighbour_index)``);
+        None with the full observation."""
+        if self._result is None:
+            raise RuntimeError("call reset() before neighbour_index")
+        index = self.episodes.last.neighbour_index
+        return None if index is None else index[0]
+
     def state(self) -> np.ndarray:
         """Global state (see the module docstring)."""
         if self._result is None:

@@ -52,9 +52,11 @@ from uav_formation_env.evaluation.metrics import (
     observer_rms,
     obstacle_events,
     summarise,
+    summarise_groups,
 )
 from uav_formation_env.evaluation.mission import (
     MissionMetrics,
+    concatenate_missions,
     mean_ci95,
     mission_metrics,
     mission_summary,
@@ -73,6 +75,7 @@ from uav_formation_env.evaluation.runner import (
     ProgressLike,
     concatenate_batches,
     policy_plans,
+    run_episode_groups,
     run_episodes,
 )
 from uav_formation_env.policies.learned import SB3_ALGORITHMS, SB3Policy
@@ -99,6 +102,7 @@ __all__ = [
     "SB3Policy",
     "formation_rmse",
     "concatenate_batches",
+    "concatenate_missions",
     "json_ready",
     "make_policy",
     "mean_ci95",
@@ -112,8 +116,10 @@ __all__ = [
     "policy_plans",
     "preset_route",
     "read_records",
+    "run_episode_groups",
     "run_episodes",
     "summarise",
+    "summarise_groups",
     "write_json",
     "write_records",
 ]

@@ -9,6 +9,7 @@ import numpy as np
 from uav_formation_env.core.cost import anchored
 from uav_formation_env.evaluation.mission import (
     MissionMetrics,
+    concatenate_missions,
     mean_ci95,
     mission_metrics,
     mission_summary,
@@ -29,9 +30,14 @@ def _sample_std(x: np.ndarray, axis: int = 0) -> np.ndarray:
 def formation_rmse(batch: EpisodeBatch) -> np.ndarray:
     """(B,) RMS over steps and UAVs of each UAV's position error from its formation slot [m]."""
     cfg = batch.scenario.formation
-    z = batch.z.reshape(-1, *batch.z.shape[2:])  # (T+1)·B rows of (N, 6)
-    a = anchored(z, np.asarray(cfg.offsets, dtype=float), cfg.mirrored_offsets)[..., :3]
-    a = a.reshape(*batch.z.shape[:3], 3)
+    if batch.scenes is None:
+        offsets = np.asarray(cfg.offsets, dtype=float)  # (N, 6)
+    else:  # each seed's drawn formation, (B, N, 6)
+        offsets = np.stack([np.asarray(s.formation.offsets, dtype=float) for s in batch.scenes])
+    # anchored() takes (B, N, *extra, 6): seeds first, then UAVs, then the time steps
+    z = batch.z.transpose(1, 2, 0, 3)
+    a = anchored(z, offsets if offsets.ndim == 3 else offsets[None], cfg.mirrored_offsets)
+    a = a[..., :3].transpose(2, 0, 1, 3)  # (T+1, B, N, 3)
     e = a - a.mean(axis=2, keepdims=True)
     return np.sqrt((e**2).sum(axis=-1).mean(axis=(0, 2)))
 
@@ -145,6 +151,59 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
             ratio = batch.j_exec[batch.triggered] / batch.j_pre[batch.triggered]
             summary["optimiser_cost_ratio_median"] = float(np.median(ratio))
     return summary
+
+
+def summarise_groups(batches: list[EpisodeBatch]) -> dict[str, Any]:
+    """:func:`summarise` of the groups of :func:`~uav_formation_env.evaluation.
+    run_episode_groups` (one group: its summary, unchanged).
+
+    Over several groups (a distribution over N): the cost, mission, separation, collision,
+    trigger and timing entries over every seed (seeds in group order), ``n_uav_per_seed``, and
+    each group's own summary under ``groups`` (keyed by N).
+    """
+    parts = [summarise(batch) for batch in batches]
+    if len(parts) == 1:
+        return parts[0]
+    first = batches[0]
+    seeds = [seed for batch in batches for seed in batch.seeds]
+    realised = np.concatenate([batch.stage_cost.sum(axis=0).mean(axis=1) for batch in batches])
+    mean, cost_ci95 = mean_ci95(realised)
+    triggers = [p["triggers_per_uav_per_seed"] for p in parts]
+    per_seed_triggers = (
+        None
+        if any(t is None for t in triggers)
+        else [float(np.mean(row)) for t in triggers for row in t]
+    )
+    seconds = sum(batch.wall_seconds for batch in batches)
+
+    def joined(key: str) -> list[Any]:
+        return [value for p in parts for value in p[key]]
+
+    return {
+        "policy": first.policy_name,
+        "scenario": first.scenario.name,
+        "observer": bool(first.scenario.observer.enabled),
+        "seeds": seeds,
+        "n_uav_per_seed": [batch.z.shape[2] for batch in batches for _ in batch.seeds],
+        "duration_s": float(first.scenario.duration),
+        "n_steps": first.n_steps,
+        "triggers_mean": None if per_seed_triggers is None else float(np.mean(per_seed_triggers)),
+        "triggers_per_seed": per_seed_triggers,
+        "realised_cost_mean": mean,
+        "realised_cost_ci95": cost_ci95,
+        "realised_cost_per_seed": realised.tolist(),
+        "mission": mission_summary(
+            concatenate_missions([mission_of(batch) for batch in batches]), seeds
+        ),
+        "formation_rmse_m": float(np.mean(joined("formation_rmse_m_per_seed"))),
+        "formation_rmse_m_per_seed": joined("formation_rmse_m_per_seed"),
+        "min_separation_m": min(p["min_separation_m"] for p in parts),
+        "collisions": sum(p["collisions"] for p in parts),
+        "collisions_per_seed": joined("collisions_per_seed"),
+        "seconds_per_batch": seconds,
+        "seconds_per_episode": seconds / len(seeds),
+        "groups": {str(batch.z.shape[2]): part for batch, part in zip(batches, parts)},
+    }
 
 
 def nash_gap_summary(batch: EpisodeBatch) -> dict[str, Any] | None:

@@ -23,7 +23,7 @@ against the mission itself:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -196,6 +196,27 @@ def mission_metrics(
         min_separation_time=t[1:][closest_step],
         max_route_error=scenario.mission.max_route_error,
     )
+
+
+def concatenate_missions(parts: Sequence[MissionMetrics]) -> MissionMetrics:
+    """The metrics of several groups of episodes as one (episodes in the order of ``parts``);
+    obstacle columns are padded to the largest count (padding is neither required nor met)."""
+    count = max(m.obstacle_met.shape[1] for m in parts)
+
+    def padded(x: np.ndarray, fill: Any) -> np.ndarray:
+        return np.pad(x, ((0, 0), (0, count - x.shape[1])), constant_values=fill)
+
+    joined: dict[str, Any] = {}
+    for f in fields(MissionMetrics):
+        values = [getattr(m, f.name) for m in parts]
+        if f.name == "max_route_error":
+            joined[f.name] = values[0]
+        elif f.name.startswith("obstacle_"):
+            fill = False if values[0].dtype == bool else np.nan
+            joined[f.name] = np.concatenate([padded(x, fill) for x in values])
+        else:
+            joined[f.name] = np.concatenate(values)
+    return MissionMetrics(**joined)
 
 
 def _nan_min(x: np.ndarray) -> float | None:

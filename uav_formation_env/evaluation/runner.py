@@ -6,6 +6,7 @@ import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from tqdm import tqdm
@@ -17,6 +18,7 @@ from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
 from uav_formation_env.policies.registry import BatchPolicy
+from uav_formation_env.scenes import seeds_by_n_uav
 from uav_formation_env.seeding import check_seed
 
 
@@ -123,10 +125,13 @@ def run_episodes(
     progress: ProgressLike = False,
     desc: str | None = None,
     nash_gap: bool = False,
+    n_uav: int | None = None,
 ) -> EpisodeBatch:
     """Run one episode per seed, all seeds as one batch, with one ``act_batch`` call per step.
 
-    Copy b is seeded with ``seeds[b]`` (a copy reproduces a one-seed run of that seed).
+    Copy b is seeded with ``seeds[b]`` (a copy reproduces a one-seed run of that seed). A
+    scenario that draws N per reset needs ``n_uav`` and seeds that all draw it
+    (:func:`run_episode_groups` groups them).
 
     Args:
         scenario: the scenario.
@@ -142,6 +147,7 @@ def run_episodes(
             equilibrium of the horizon game (:func:`policy_plans`,
             :func:`~uav_formation_env.policies.nash.nash_gap`); not counted in the policy's
             wall time.
+        n_uav: N of a scenario that draws N per reset (None: the scenario's one N).
     """
     if duration is not None:
         scenario = with_overrides(scenario, {"duration": float(duration)})
@@ -150,7 +156,7 @@ def run_episodes(
         raise ValueError("seeds must be a non-empty list of non-negative ints")
     batch, n_steps = len(seeds), scenario.n_steps
     # evaluation's rule: every seed is flown to its end, collisions are counted, not ended on
-    episodes = FormationEpisodes(scenario, batch, fly_on_after_collision=True)
+    episodes = FormationEpisodes(scenario, batch, fly_on_after_collision=True, n_uav=n_uav)
     sim, n_uav = episodes.sim, episodes.n_uav
     if hasattr(policy, "reset"):
         policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
@@ -171,9 +177,13 @@ def run_episodes(
     callback = progress if callable(progress) else None
     if progress is True:
         bar = tqdm(total=n_steps, desc=desc or policy_name or "episodes", unit="step")
+    links = getattr(policy, "needs_neighbour_index", False)
     for k in range(n_steps):
         t0 = time.perf_counter()
-        actions = np.asarray(policy.act_batch(obs), dtype=float)
+        if links:  # whose plans each UAV receives: communication metadata, not the observation
+            actions = np.asarray(policy.act_batch(obs, step.neighbour_index), dtype=float)
+        else:
+            actions = np.asarray(policy.act_batch(obs), dtype=float)
         t1 = time.perf_counter()
         if actions.shape != (batch, n_uav, 3):
             raise ValueError(
@@ -246,6 +256,29 @@ def run_episodes(
         nash_in_box=gap_arrays[2],
         scenes=None if scenario.scene is None else list(sim.scenes),
     )
+
+
+def run_episode_groups(
+    scenario: Scenario,
+    policy: BatchPolicy,
+    seeds: Sequence[int],
+    **options: Any,
+) -> list[EpisodeBatch]:
+    """:func:`run_episodes` per group of seeds that draw the same N (one group, one batch, for a
+    scenario of one N), groups in ascending N; ``options`` are those of :func:`run_episodes`
+    (a progress bar's label gets the group's N)."""
+    groups = seeds_by_n_uav(scenario, [check_seed(s, f"seeds[{k}]") for k, s in enumerate(seeds)])
+    if len(groups) == 1:
+        return [run_episodes(scenario, policy, seeds, **options)]
+    batches = []
+    for n_uav, group in groups.items():
+        label = options.get("desc") or options.get("policy_name") or "episodes"
+        batches.append(
+            run_episodes(
+                scenario, policy, group, **{**options, "desc": f"{label}, N={n_uav}"}, n_uav=n_uav
+            )
+        )
+    return batches
 
 
 def policy_plans(

@@ -28,9 +28,11 @@ from uav_formation_env.core.cost import (
     HorizonCost,
     anchored,
     prepare_horizon_cost,
+    prepare_slot_horizon_cost,
     relative_offset_sign,
     superposed_rollout,
 )
+from uav_formation_env.core.local_observation import DecodedLocalObservation, slot_frame
 from uav_formation_env.core.observation import DecodedObservation, others_index
 
 __all__ = [
@@ -137,8 +139,28 @@ class HorizonProblems:
     half_width: np.ndarray
 
 
+def received_slot_plans(
+    plans: np.ndarray, neighbour_index: np.ndarray, adjacency: np.ndarray
+) -> np.ndarray:
+    """The sequences each receiver assumes for the UAV in each of its slots: that UAV's plan if
+    h_ij = 1, else 0 (as :func:`received_plans`).
+
+    Args:
+        plans: (B, N_send, H, 3) sequences the senders broadcast [m/s^2].
+        neighbour_index: (B, N_recv, k) the sender in each slot, -1 where absent.
+        adjacency: (B, N_recv, k) h_ij of each slot (0 where absent).
+
+    Returns:
+        (B, N_recv, k, H, 3) [m/s^2].
+    """
+    batch = plans.shape[0]
+    copies = np.arange(batch).reshape(batch, 1, 1)
+    gathered = plans[copies, np.maximum(neighbour_index, 0)]  # (B, N_recv, k, H, 3)
+    return np.where(adjacency[..., None, None] > 0, gathered, 0.0)
+
+
 def horizon_problems(
-    decoded: DecodedObservation, plans: np.ndarray, scenario: Scenario
+    decoded: DecodedObservation | DecodedLocalObservation, plans: np.ndarray, scenario: Scenario
 ) -> HorizonProblems:
     """Every UAV's J_i against the plans it receives, from its observation and mission data.
 
@@ -149,17 +171,17 @@ def horizon_problems(
     reference held over the horizon while its observation says "avoiding" (docs/model.md §4.3).
 
     Args:
-        decoded: observations (B, N, dim), decoded.
+        decoded: observations (B, N, dim), decoded: the full layout, or the local one
+            (:func:`~uav_formation_env.core.local_observation.decode_local_observations` with
+            its ``neighbour_index``), in which UAV i sees only the UAVs in its slots and works in
+            their :func:`~uav_formation_env.core.local_observation.slot_frame` (the formation
+            offsets then come from the observation, not the scenario).
         plans: (B, N, H, 3) each sender's sequence as receivers assume it (eq. 20 warm starts, or
             the previous inner round's outputs) [m/s^2]; only neighbours' rows are used.
         scenario: mission data: offsets, weights, horizon, δ, duration, u_max, schedule.
     """
-    offsets = np.asarray(scenario.formation.offsets, dtype=float)
-    mirrored = scenario.formation.mirrored_offsets
     dt, horizon = scenario.dynamics.dt, scenario.cost.horizon
     batch, n = decoded.velocity.shape[:2]
-    frame = own_frame_views(decoded, offsets, mirrored)
-    trajectories = superposed_rollout(frame.views, received_plans(plans, frame.adjacency), dt)
     # Each UAV's own time, reference and avoiding flag: a batch of B·N single-UAV previews.
     preview = topology.reference_preview(
         scenario.schedule,
@@ -169,15 +191,35 @@ def horizon_problems(
         decoded.reference_velocity.reshape(-1, 1, 3),
         decoded.avoiding.reshape(-1, 1),
     ).reshape(batch, n, horizon + 1, 3)
-    cost = prepare_horizon_cost(
-        frame.z_own,
-        trajectories,
-        preview,
-        frame.adjacency,
-        offsets,
-        scenario.cost,
-        dt,
-        mirrored,
-    )
+    if isinstance(decoded, DecodedLocalObservation):
+        if decoded.neighbour_index is None:
+            raise ValueError("local observations need their neighbour_index to exchange plans")
+        slots = slot_frame(decoded)
+        received = received_slot_plans(plans, decoded.neighbour_index, slots.adjacency)
+        cost = prepare_slot_horizon_cost(
+            slots.own,
+            superposed_rollout(slots.slots, received, dt),
+            slots.slot_offsets,
+            preview,
+            slots.adjacency,
+            slots.present,
+            scenario.cost,
+            dt,
+        )
+    else:
+        offsets = np.asarray(scenario.formation.offsets, dtype=float)
+        mirrored = scenario.formation.mirrored_offsets
+        frame = own_frame_views(decoded, offsets, mirrored)
+        trajectories = superposed_rollout(frame.views, received_plans(plans, frame.adjacency), dt)
+        cost = prepare_horizon_cost(
+            frame.z_own,
+            trajectories,
+            preview,
+            frame.adjacency,
+            offsets,
+            scenario.cost,
+            dt,
+            mirrored,
+        )
     half_width = np.maximum(scenario.dynamics.u_max - np.abs(decoded.estimate), 0.0)
     return HorizonProblems(cost=cost, half_width=half_width)

@@ -81,10 +81,15 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.core.local_observation import (
+    DecodedLocalObservation,
+    decode_local_observations,
+    observation_size,
+)
 from uav_formation_env.core.observation import (
+    DecodedObservation,
     decode_observations,
-    observation_dim,
-    require_full_layout,
+    require_decodable,
 )
 from uav_formation_env.policies.broadcast import shift_warm_start
 from uav_formation_env.policies.dmpc_step import DMPCRecords, StepRecord, step_solver
@@ -162,12 +167,16 @@ class NashDMPCPolicy:
         self._rngs: list[np.random.Generator] = []
         self._fresh = False  # reset() was called and no step taken since
         sc = self.scenario
-        require_full_layout(sc, "NashDMPCPolicy")
+        require_decodable(sc, "NashDMPCPolicy")
+        # With the local layout UAV i sees its k slots and exchanges plans with the UAVs in them
+        # (the neighbour_index that comes with the observation); N may change between episodes.
+        self.local = sc.observation.kind == "local"
+        self.needs_neighbour_index = self.local
         self.n_uav = sc.n_uav
         self.horizon = sc.cost.horizon
         self.dt = sc.dynamics.dt
         self.u_max = sc.dynamics.u_max
-        self.obs_dim = observation_dim(self.n_uav)
+        self.obs_dim = observation_size(sc)
         self.agents = [f"uav_{i}" for i in range(self.n_uav)]
         self._plans: np.ndarray | None = None  # (B, N, H, 3) last broadcast plans [m/s^2]
         self._records: list[StepRecord] = []
@@ -223,9 +232,11 @@ class NashDMPCPolicy:
     @plans.setter
     def plans(self, value: np.ndarray) -> None:
         value = np.array(value, dtype=float)
-        if value.ndim != 4 or value.shape[1:] != (self.n_uav, self.horizon, 3):
+        n_ok = self.local or (value.ndim == 4 and value.shape[1] == self.n_uav)
+        if value.ndim != 4 or value.shape[2:] != (self.horizon, 3) or not n_ok:
+            n_text = "N" if self.local else str(self.n_uav)
             raise ValueError(
-                f"plans must have shape (B, {self.n_uav}, {self.horizon}, 3), got {value.shape}"
+                f"plans must have shape (B, {n_text}, {self.horizon}, 3), got {value.shape}"
             )
         self._plans = value
 
@@ -234,30 +245,22 @@ class NashDMPCPolicy:
         return shift_warm_start(self.plans)
 
     # ------------------------------------------------------------------ acting
-    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+    def act_batch(self, obs: np.ndarray, neighbour_index: np.ndarray | None = None) -> np.ndarray:
         """One control step of every UAV of every copy.
 
         Args:
-            obs: (B, N, dim) observations of :func:`~uav_formation_env.core.observation.
-                build_observations` (agent order uav_0..uav_{N-1}).
+            obs: (B, N, dim) observations of :func:`~uav_formation_env.episode.observations_of`
+                (agent order uav_0..uav_{N-1}).
+            neighbour_index: (B, N, k) the UAV in each neighbour slot of the local layout
+                (:attr:`~uav_formation_env.episode.EpisodeStep.neighbour_index`): whose plans a
+                UAV receives. Required with ``observation.kind = "local"``, else unused.
 
         Returns:
             (B, N, 3) normalised actions ``u_n(0|t) / u_max`` in [-1, 1].
         """
         start = time.perf_counter()
-        obs = np.asarray(obs, dtype=np.float64)
-        if obs.ndim != 3 or obs.shape[1:] != (self.n_uav, self.obs_dim):
-            raise ValueError(
-                f"obs must have shape (B, {self.n_uav}, {self.obs_dim}), got {obs.shape}"
-            )
-        if not np.isfinite(obs).all():
-            copy, agent = np.argwhere(~np.isfinite(obs))[0, :2]
-            raise ValueError(
-                f"obs contains NaN or infinite values (first: copy {copy}, uav_{agent}); a "
-                "policy cannot act on them"
-            )
-        decoded = decode_observations(obs, self.n_uav)
-        self._restart(decoded.time_fraction[:, 0] == 0.0)
+        decoded = self._decode(obs, neighbour_index)
+        self._restart(decoded.time_fraction[:, 0] == 0.0, decoded.velocity.shape[1])
         assert self._plans is not None
         output, record = self._solver.step(decoded, self._plans, self.threshold, self._rngs)
         self._plans = output
@@ -265,21 +268,62 @@ class NashDMPCPolicy:
         self._wall.append(time.perf_counter() - start)
         return np.clip(output[..., 0, :] / self.u_max, -1.0, 1.0)
 
-    def act(self, observations: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    def _decode(
+        self, obs: np.ndarray, neighbour_index: np.ndarray | None
+    ) -> DecodedObservation | DecodedLocalObservation:
+        """Check and decode (B, N, dim) observations; a ValueError names what is wrong."""
+        obs = np.asarray(obs, dtype=np.float64)
+        n_text = "N" if self.local else str(self.n_uav)
+        if (
+            obs.ndim != 3
+            or obs.shape[2] != self.obs_dim
+            or (not self.local and obs.shape[1] != self.n_uav)
+        ):
+            raise ValueError(f"obs must have shape (B, {n_text}, {self.obs_dim}), got {obs.shape}")
+        if not np.isfinite(obs).all():
+            copy, agent = np.argwhere(~np.isfinite(obs))[0, :2]
+            raise ValueError(
+                f"obs contains NaN or infinite values (first: copy {copy}, uav_{agent}); a "
+                "policy cannot act on them"
+            )
+        if not self.local:
+            return decode_observations(obs, self.n_uav)
+        if neighbour_index is None:
+            raise ValueError(
+                "neighbour_index is required with observation.kind='local': the UAV in each "
+                "neighbour slot (EpisodeStep.neighbour_index), whose plans a UAV receives"
+            )
+        config = self.scenario.observation
+        return decode_local_observations(
+            obs,
+            config.neighbours,
+            config.obstacles,
+            config.nearest,
+            neighbour_index=neighbour_index,
+        )
+
+    def act(
+        self, observations: Mapping[str, np.ndarray], neighbour_index: np.ndarray | None = None
+    ) -> dict[str, np.ndarray]:
         """ParallelEnv convenience: one copy (B = 1), agents ``uav_0 .. uav_{N-1}``.
 
         Args:
-            observations: agent -> (dim,) observation; every agent must be present.
+            observations: agent -> (dim,) observation; every agent must be present (with the
+                local layout, the agents of the episode: uav_0 .. uav_{N-1} for its N).
+            neighbour_index: (N, k) the UAV in each neighbour slot (local layout only; the
+                ParallelEnv's ``neighbour_index``).
 
         Returns:
             agent -> (3,) float32 normalised action.
         """
-        missing = [a for a in self.agents if a not in observations]
+        agents = [f"uav_{i}" for i in range(len(observations))] if self.local else self.agents
+        missing = [a for a in agents if a not in observations]
         if missing:
             raise KeyError(f"observations lack agents {missing}")
-        obs = np.stack([np.asarray(observations[a]) for a in self.agents])[None]
-        actions = self.act_batch(obs)[0].astype(np.float32)
-        return {a: actions[i] for i, a in enumerate(self.agents)}
+        obs = np.stack([np.asarray(observations[a]) for a in agents])[None]
+        index = None if neighbour_index is None else np.asarray(neighbour_index)[None]
+        actions = self.act_batch(obs, index)[0].astype(np.float32)
+        return {a: actions[i] for i, a in enumerate(agents)}
 
     def predict(
         self,
@@ -300,6 +344,11 @@ class NashDMPCPolicy:
         Returns:
             ``(actions, state)`` with actions (B·N, 3) float32 in [-1, 1].
         """
+        if self.local:
+            raise ValueError(
+                "predict() serves per-agent vector envs of the full layout; with "
+                "observation.kind='local' call act_batch(obs, neighbour_index)"
+            )
         obs = np.asarray(observation)
         if obs.ndim != 2 or obs.shape[0] % self.n_uav or obs.shape[1] != self.obs_dim:
             raise ValueError(
@@ -316,18 +365,26 @@ class NashDMPCPolicy:
     # ------------------------------------------------------------------ records
     def records(self) -> DMPCRecords:
         """The per-step records since the last (automatic) reset, as arrays."""
-        batch = 1 if self._plans is None else self._plans.shape[0]
-        return DMPCRecords.from_steps(self._records, self._wall, batch, self.n_uav)
+        batch, n_uav = (1, self.n_uav) if self._plans is None else self._plans.shape[:2]
+        return DMPCRecords.from_steps(self._records, self._wall, batch, n_uav)
 
     def trigger_counts(self) -> np.ndarray:
         """(B, N) number of triggered steps per copy and UAV since the last reset."""
         return self.records().triggered.sum(axis=0)
 
     # ------------------------------------------------------------------ internals
-    def _restart(self, restart: np.ndarray) -> None:
+    def _restart(self, restart: np.ndarray, n_uav: int) -> None:
         batch = restart.shape[0]
         if self._plans is None or self._plans.shape[0] != batch:
             self.reset(batch)
+        assert self._plans is not None
+        if self._plans.shape[1] != n_uav:  # the local layout: a new episode of another N
+            if not restart.all():
+                raise ValueError(
+                    f"obs holds {n_uav} UAVs, but the episodes under way have "
+                    f"{self._plans.shape[1]}; N may change only when every copy starts anew"
+                )
+            self._plans = np.zeros((batch, n_uav, self.horizon, 3))
         elif restart.all() and not self._fresh:
             # a new episode in every copy: the copies' streams go on
             self._plans[:] = 0.0

@@ -25,13 +25,17 @@ Shapes: B copies, N UAVs, H horizon steps.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import TypeVar
 
 import numpy as np
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.local_observation import DecodedLocalObservation
 from uav_formation_env.core.observation import DecodedObservation, decode_observations
 from uav_formation_env.policies.best_response import BestResponse, best_response
 from uav_formation_env.policies.broadcast import HorizonProblems, horizon_problems
+
+DecodedT = TypeVar("DecodedT", DecodedObservation, DecodedLocalObservation)
 
 __all__ = [
     "NASH_METHODS",
@@ -112,7 +116,7 @@ def nash_gap(obs: np.ndarray, scenario: Scenario, plans: np.ndarray) -> NashGap:
         that has shrunk since (its never-worse-than-W rule).
     """
     decoded = decode_observations(np.asarray(obs, dtype=float), scenario.n_uav)
-    plans = _check_plans(plans, scenario, decoded.velocity.shape[0])
+    plans = _check_plans(plans, scenario, decoded.velocity.shape[:2])
     problems = horizon_problems(decoded, plans, scenario)
     return _gap(problems, plans, best_response(problems, x0=plans))
 
@@ -135,9 +139,9 @@ def _gap(problems: HorizonProblems, plans: np.ndarray, br: BestResponse) -> Nash
     )
 
 
-def _check_plans(plans: np.ndarray, scenario: Scenario, batch: int) -> np.ndarray:
+def _check_plans(plans: np.ndarray, scenario: Scenario, batch_and_n: tuple[int, ...]) -> np.ndarray:
     plans = np.asarray(plans, dtype=float)
-    expected = (batch, scenario.n_uav, scenario.cost.horizon, 3)
+    expected = (*batch_and_n, scenario.cost.horizon, 3)
     if plans.shape != expected:
         raise ValueError(f"plans must have shape {expected}, got {plans.shape}")
     if not np.isfinite(plans).all():
@@ -203,11 +207,11 @@ def iterated_best_response(
         raise ValueError(f"max_iter must be an integer >= 0, got {max_iter!r}")
     decoded = (
         obs
-        if isinstance(obs, DecodedObservation)
+        if isinstance(obs, DecodedObservation | DecodedLocalObservation)
         else decode_observations(np.asarray(obs, dtype=float), scenario.n_uav)
     )
     batch, n_uav = decoded.velocity.shape[:2]
-    plans = _check_plans(plans, scenario, batch).copy()
+    plans = _check_plans(plans, scenario, (batch, n_uav)).copy()
     playing = np.ones((batch, n_uav), bool) if playing is None else np.asarray(playing, bool)
     iterations = np.zeros(batch, dtype=np.int64)
     change = np.zeros(batch)
@@ -287,8 +291,10 @@ def _gauss_seidel_sweep(
     return plans
 
 
-def _take_copies(decoded: DecodedObservation, copies: np.ndarray) -> DecodedObservation:
-    return DecodedObservation(**{f.name: getattr(decoded, f.name)[copies] for f in fields(decoded)})
+def _take_copies(decoded: DecodedT, copies: np.ndarray) -> DecodedT:
+    """The copies ``copies`` of decoded observations (full or local layout)."""
+    taken = {f.name: getattr(decoded, f.name) for f in fields(decoded)}
+    return type(decoded)(**{k: None if v is None else v[copies] for k, v in taken.items()})
 
 
 def _take_gap(gap: NashGap, rows: np.ndarray) -> NashGap:

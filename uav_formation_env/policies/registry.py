@@ -81,7 +81,8 @@ POLICY_HELP = (
 
 class BatchPolicy(Protocol):
     """What :func:`~uav_formation_env.evaluation.run_episodes` needs of a policy
-    (``reset(batch_size, seeds)`` optional)."""
+    (``reset(batch_size, seeds)`` optional; a policy with ``needs_neighbour_index = True`` is
+    called as ``act_batch(obs, neighbour_index)`` with the local layout's slot index)."""
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray: ...
 

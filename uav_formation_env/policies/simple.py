@@ -14,10 +14,11 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.cost import relative_offset_sign
+from uav_formation_env.core.local_observation import decode_local_observations, slot_frame
 from uav_formation_env.core.observation import (
     decode_observations,
     others_index,
-    require_full_layout,
+    require_decodable,
 )
 from uav_formation_env.policies.heuristic import ConsensusGains, consensus_pd
 from uav_formation_env.seeding import check_seed, copy_streams
@@ -59,7 +60,10 @@ class HeuristicPolicy:
     velocity, the other UAVs' states from the observed relative formation errors plus the known
     offsets, its neighbour flags as its row of H and its reference velocity; then the shared
     control law is evaluated on that view and UAV i's row is kept. Up to the float32 rounding of
-    the observation this is the input the law gives on the simulator's arrays.
+    the observation this is the input the law gives on the simulator's arrays. With the local
+    layout the view is UAV i and the UAVs in its k + r slots
+    (:func:`~uav_formation_env.core.local_observation.slot_frame`, offsets from the observation),
+    so the law sums over the neighbours UAV i sees (the k nearest of its in-neighbours).
 
     Args:
         scenario: formation offsets, u_max and the offset convention (mission data).
@@ -67,15 +71,18 @@ class HeuristicPolicy:
     """
 
     def __init__(self, scenario: Scenario, gains: ConsensusGains | None = None) -> None:
-        require_full_layout(scenario, "HeuristicPolicy")
+        require_decodable(scenario, "HeuristicPolicy")
         self.n_uav = scenario.n_uav
         self.u_max = scenario.dynamics.u_max
         self.offsets = np.asarray(scenario.formation.offsets, dtype=float)
         self.mirrored = scenario.formation.mirrored_offsets
         self.gains = ConsensusGains() if gains is None else gains
+        self.observation = scenario.observation
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         obs = np.asarray(obs, dtype=float)
+        if self.observation.kind == "local":
+            return self._act_local(obs)
         batch, n = obs.shape[:2]
         decoded = decode_observations(obs, n)
         sign = relative_offset_sign(self.mirrored)
@@ -101,3 +108,25 @@ class HeuristicPolicy:
             self.mirrored,
         ).reshape(batch, n, n, 3)
         return u[:, own, own] / self.u_max
+
+    def _act_local(self, obs: np.ndarray) -> np.ndarray:
+        """The law on each UAV's (1 + k)-UAV view: itself (row 0), then its slots."""
+        config = self.observation
+        decoded = decode_local_observations(
+            obs, config.neighbours, config.obstacles, config.nearest
+        )
+        frame = slot_frame(decoded)
+        lead = obs.shape[:-1]  # (B, N)
+        rows = int(np.prod(lead))
+        k = config.neighbours + config.nearest  # UAV slots
+        z = np.concatenate((frame.own[..., None, :], frame.slots), axis=-2).reshape(rows, k + 1, 6)
+        offsets = np.concatenate((np.zeros((*lead, 1, 6)), frame.slot_offsets), axis=-2).reshape(
+            rows, k + 1, 6
+        )
+        adjacency = np.zeros((rows, k + 1, k + 1))
+        adjacency[:, 0, 1:] = frame.adjacency.reshape(rows, k)
+        reference = np.broadcast_to(
+            decoded.reference_velocity.reshape(rows, 1, 3), (rows, k + 1, 3)
+        )
+        u = consensus_pd(z, reference, adjacency, offsets, self.u_max, self.gains)
+        return u[:, 0].reshape(*lead, 3) / self.u_max

@@ -24,7 +24,12 @@ senders runs over the receiver's own views. :func:`prepare_horizon_cost` compute
 that does not depend on the candidates once, for optimisers that evaluate many populations.
 """
 
-from uav_formation_env.core.cost.horizon import HorizonCost, horizon_cost, prepare_horizon_cost
+from uav_formation_env.core.cost.horizon import (
+    HorizonCost,
+    horizon_cost,
+    prepare_horizon_cost,
+    prepare_slot_horizon_cost,
+)
 from uav_formation_env.core.cost.quadratic import (
     QuadraticCost,
     SeparationCost,
@@ -62,6 +67,7 @@ __all__ = [
     "others_mask",
     "polarisation_points",
     "prepare_horizon_cost",
+    "prepare_slot_horizon_cost",
     "relative_offset_sign",
     "separation_active",
     "separation_sq",

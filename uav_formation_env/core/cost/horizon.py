@@ -227,21 +227,86 @@ def prepare_horizon_cost(
         offsets.reshape(1, 1, n_uav, 1, 6) if per_receiver else offsets.reshape(1, n_uav, 1, 6)
     )
     others = neighbour_trajectories - relative_offset_sign(mirrored) * send_offsets
-    horizon = reference_preview.shape[-2] - 1
     batch, n_recv = z0.shape[:2]
     positions = neighbour_trajectories[..., :3]
     if not per_receiver:
         positions = np.broadcast_to(positions[:, None], (batch, n_recv, *positions.shape[1:]))
+    return _prepared(
+        z0,
+        z0 - anchored(z0, offsets, mirrored),
+        neighbour_moments(others, adjacency, per_receiver),
+        positions,
+        others_mask(batch, n_recv),
+        reference_preview,
+        weights,
+        dt,
+    )
+
+
+def prepare_slot_horizon_cost(
+    z0: np.ndarray,
+    slot_trajectories: np.ndarray,
+    slot_offsets: np.ndarray,
+    reference_preview: np.ndarray,
+    adjacency: np.ndarray,
+    present: np.ndarray,
+    weights: CostConfig,
+    dt: float,
+) -> HorizonCost:
+    """:func:`prepare_horizon_cost` for receivers that see S slots (e.g. their k nearest UAVs)
+    in their own frame, where the receiver's own formation offset is 0.
+
+    J_i depends on anchored states only through differences ``a_j - a_i`` and on positions only
+    through ``p_j - p_i``, so a frame that gives the receiver offset 0 and each slot the offset
+    ``z_j - a_j - (z_i - a_i)`` gives the same J_i as global coordinates.
+
+    Args:
+        z0: (B, R, 6) the receivers' own states in their frames [m, m/s].
+        slot_trajectories: (B, R, S, H+1, 6) each slot's predicted states in the receiver's
+            frame [m, m/s].
+        slot_offsets: (B, R, S, 6) what anchoring subtracts from each slot's states, relative to
+            the receiver's [m, m/s].
+        reference_preview: (B, R, H+1, 3) v^d_i(t + kδ) [m/s].
+        adjacency: (B, R, S) h_ij of the UAV in each slot (0 for absent slots).
+        present: (B, R, S) 1 where the slot holds a UAV (the separation term counts it).
+        weights: q, r, m, n, s, d_s.
+        dt: control step δ [s].
+    """
+    return _prepared(
+        z0,
+        np.zeros_like(z0),
+        neighbour_moments(slot_trajectories - slot_offsets[..., None, :], adjacency, True),
+        slot_trajectories[..., :3],
+        np.asarray(present, dtype=float),
+        reference_preview,
+        weights,
+        dt,
+    )
+
+
+def _prepared(
+    z0: np.ndarray,
+    own_offset: np.ndarray,
+    moments: NeighbourMoments,
+    others_position: np.ndarray,
+    mask: np.ndarray,
+    reference_preview: np.ndarray,
+    weights: CostConfig,
+    dt: float,
+) -> HorizonCost:
+    """The :class:`HorizonCost` of prepared senders' terms: the receivers' free response and the
+    unit input responses are computed here, once for both frames."""
+    horizon = reference_preview.shape[-2] - 1
     free = (z0 @ state_response(horizon, dt)).reshape(*z0.shape[:-1], horizon + 1, 6)
     return HorizonCost(
         free=free,
         response=input_response(horizon, dt),
-        own_offset=z0 - anchored(z0, offsets, mirrored),
-        moments=neighbour_moments(others, adjacency, per_receiver),
+        own_offset=own_offset,
+        moments=moments,
         reference_preview=reference_preview,
         weights=weights,
-        others_position=positions,
-        others_mask=others_mask(batch, n_recv),
+        others_position=others_position,
+        others_mask=mask,
     )
 
 
