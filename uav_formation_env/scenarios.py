@@ -18,7 +18,9 @@ Named scenarios of this module (registered in :data:`uav_formation_env.config_io
 - ``swarm_20``, ``swarm_50``, ``swarm_100`` (:func:`swarm_scenario`): concrete scenarios with N
   UAVs in a 10 m grid (a V of 100 would be 1 km wide) and a 4-nearest graph, a start box grown
   to about (3 min_spacing)² per UAV, and the paper's two obstacles on the paper's route with
-  their radii scaled from 30 m by the grid's half-width over the V's 40 m (at least 15 m).
+  their radii scaled from 30 m by the grid's half-width over the V's 40 m (at least 15 m); the
+  local observation (a full one would hold 712 values per agent at N = 100, and the DMPC
+  acting on the local one took 104 ms per step at N = 100 against 276 ms on the full one).
 
 The templates (a :class:`~uav_formation_env.config.SceneConfig` in ``scene``) are concrete
 until drawn: :func:`uav_formation_env.scenes.draw_scene` gives the scenario of one reset.
@@ -241,6 +243,7 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
         formation=formation,
         initial=start_box_for(base.initial, n_uav),
         avoidance=replace(base.avoidance, obstacles=obstacles),
+        observation=ObservationConfig(kind="local"),
     )
 
 
