@@ -106,6 +106,18 @@ def test_benchmarl_task_class() -> None:
     assert bool(rollout["next", "done"][-1]) and reward.abs().max() < MAX_STEP_REWARD
 
     assert UavFormationTask.PAPER.get_task().max_steps(env) == 1000
+    # every registered scenario of one N has its task; the drawn fields and the local layout
+    from uav_formation_env.config_io import SCENARIOS
+    from uav_formation_env.scenes import n_uav_range
+
+    fixed = {name for name in SCENARIOS if len(set(n_uav_range(SCENARIOS[name]()))) == 1}
+    assert {member.name.lower() for member in UavFormationTask} == fixed
+    for member, shape in (
+        (UavFormationTask.RANDOM_FIELDS, (5, 47)),
+        (UavFormationTask.SWARM_20, (20, 95)),
+    ):
+        env = member.get_task({"duration": 40.0}).get_env_fun(1, True, 0, "cpu")()
+        assert env.rollout(3)["uav", "observation"].shape == (3, *shape)
     yaml_task = uav_formation_task("paper", reward="raw", corridor_width=0.0)
     assert yaml_task.name == "PAPER" and yaml_task.config["reward"] == "raw"
     with pytest.raises(ValueError, match="unknown uav_formation task option"):
