@@ -87,9 +87,16 @@ def test_plans_are_exchanged_through_the_slot_index():
     swapped[:, [0, 1]] = plans[:, [1, 0]]
     assert not np.allclose(j_of(swapped, index), base)
     assert not np.allclose(j_of(plans, np.roll(index, 1, axis=-1)), base)
-    # a plan with zeros everywhere but the sender's row is that sender's influence alone
+    # only UAV 0 broadcasts a non-zero plan: exactly the receivers with UAV 0 in a slot flagged
+    # h_ij = 1 see J_i change
     zero = np.zeros_like(plans)
-    assert np.allclose(j_of(zero, index), j_of(zero, np.roll(index, 1, axis=-1)))
+    only_0 = zero.copy()
+    only_0[:, 0] = plans[:, 0]
+    decoded = decode_local_observations(obs, config.neighbours, config.obstacles, config.nearest)
+    receives_0 = ((index == 0) & decoded.neighbour & decoded.slot_present).any(axis=-1)
+    assert receives_0.any() and not receives_0.all()
+    changed = ~np.isclose(j_of(only_0, index), j_of(zero, index), rtol=1e-12, atol=0)
+    np.testing.assert_array_equal(changed, receives_0)
 
 
 def test_heuristic_acts_alike_on_both_layouts():

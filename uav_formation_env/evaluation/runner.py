@@ -270,9 +270,9 @@ def run_episode_groups(
     groups = seeds_by_n_uav(scenario, [check_seed(s, f"seeds[{k}]") for k, s in enumerate(seeds)])
     if len(groups) == 1:
         return [run_episodes(scenario, policy, seeds, **options)]
+    label = options.get("desc") or options.get("policy_name") or "episodes"
     batches = []
     for n_uav, group in groups.items():
-        label = options.get("desc") or options.get("policy_name") or "episodes"
         batches.append(
             run_episodes(
                 scenario, policy, group, **{**options, "desc": f"{label}, N={n_uav}"}, n_uav=n_uav
