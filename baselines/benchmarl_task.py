@@ -2,9 +2,9 @@
 
 One task per registered scenario of one N (:data:`uav_formation_env.config_io.SCENARIOS`):
 ``UavFormationTask.PAPER``, ``.OPEN_FIELD``, ``.WINDY``, ``.RANDOM_OBSTACLES``, ``.N3``, ``.N8``,
-``.RANDOM_FIELDS``, ``.SWARM_20``, ``.SWARM_50``, ``.SWARM_100``; or :func:`uav_formation_task`
-for a YAML path or any overrides. ``random_swarm`` draws N per reset, and a TorchRL group has
-one shape, so it has no task here. The environment is TorchRL's
+``.RANDOM_FIELDS``, ``.RANDOM_ROUTES``, ``.SWARM_20``, ``.SWARM_50``, ``.SWARM_100``; or
+:func:`uav_formation_task` for a YAML path or any overrides. ``random_swarm`` draws N per
+reset, and a TorchRL group has one shape, so it has no task here. The environment is TorchRL's
 ``PettingZooWrapper`` around :func:`uav_formation_env.parallel_env`, unpatched: one group
 ``"uav"`` of the N UAVs, observations (N, 47) for N = 5, continuous actions (N, 3) in [-1, 1],
 the global state of ``state()`` for centralised critics (MAPPO, MADDPG, QMIX-like mixers), and the
@@ -224,6 +224,7 @@ class UavFormationTask(Task):
     N3 = None
     N8 = None
     RANDOM_FIELDS = None
+    RANDOM_ROUTES = None
     SWARM_20 = None
     SWARM_50 = None
     SWARM_100 = None

@@ -528,3 +528,89 @@ def test_reference_preview_holds_avoiding_and_previews_schedule():
         np.testing.assert_array_equal(preview[0, uav, :3], np.broadcast_to(PRESET, (3, 3)))
         np.testing.assert_array_equal(preview[0, uav, 3:], np.broadcast_to((0, 20, 0), (3, 3)))
     np.testing.assert_array_equal(preview[1, :2], np.broadcast_to(PRESET, (2, 6, 3)))
+
+
+# --- several obstacles active at once (avoidance.concurrent) ------------------------------------
+
+# 80 m between centres is the least two 30 m obstacles may have with concurrent activation (safety
+# circles apart); the one-at-a-time rule needs 140 m (detection circles apart)
+PAIR = (ObstacleConfig((0.0, 0.0), 30.0), ObstacleConfig((0.0, 90.0), 30.0))
+CONCURRENT = AvoidanceConfig(obstacles=PAIR, concurrent=True)
+# at x = -50: lateral offsets from A (y = 0) and from B (y = 90) give the sides
+#   UAV 0 (y = -10): A -, B -     UAV 1 (y = 20): A +, B -
+#   UAV 2 (y = 60):  A +, B -     UAV 3 (y = 100): A +, B +
+# in range of A: 0, 1; of B: 2, 3
+FOUR = [(-50.0, -10.0), (-50.0, 20.0), (-50.0, 60.0), (-50.0, 100.0)]
+
+
+def test_overlapping_detection_circles_need_concurrent():
+    with pytest.raises(ValueError, match=r"avoidance.obstacles.*detection circles.*140\.0"):
+        AvoidanceConfig(obstacles=PAIR)
+    with pytest.raises(ValueError, match=r"avoidance.obstacles.*safety circles.*80\.0"):
+        AvoidanceConfig(obstacles=(PAIR[0], ObstacleConfig((0.0, 79.0), 30.0)), concurrent=True)
+    with pytest.raises(ValueError, match="avoidance.concurrent"):
+        AvoidanceConfig(obstacles=(), concurrent="yes")
+
+
+def test_concurrent_obstacles_activate_together_and_split_jointly():
+    state, out = step(FOUR, avoidance=CONCURRENT)
+    np.testing.assert_array_equal(state.status[0], [ACTIVE, ACTIVE])
+    np.testing.assert_array_equal(out.activated[0], [True, True])
+    np.testing.assert_array_equal(state.side[0], [[-1, 1, 1, 1], [-1, -1, -1, 1]])
+    np.testing.assert_array_equal(state.case[0], [2, 2])
+    # guides: A: + group {1, 2, 3} -> 1 (the only one in range), - group {0} -> 0;
+    # B: + group {3} -> 3, - group {0, 1, 2} -> 2
+    np.testing.assert_array_equal(state.guide[0], [[1, 0], [3, 2]])
+    # cells of the joint split: {0}, {1, 2}, {3}: the only links are 1 <-> 2
+    expected = np.zeros((4, 4))
+    expected[1, 2] = expected[2, 1] = 1.0
+    np.testing.assert_array_equal(out.adjacency[0], expected)
+    # group id bits: 1 = side - of A, 2 = side - of B
+    np.testing.assert_array_equal(out.groups[0], [3, 2, 2, 0])
+    assert out.active_obstacle[0] == 0
+    assert out.avoiding[0].all()
+
+
+def test_concurrent_each_uav_follows_the_guided_obstacle_it_is_closest_to():
+    state, out = step(FOUR, avoidance=CONCURRENT)
+    xy = np.asarray(FOUR)
+    centres = np.array([c.center for c in PAIR])
+
+    def tangent(obstacle: int, guide: int, side: int) -> np.ndarray:
+        rel = xy[guide] - centres[obstacle]
+        lx, ly = tangent_direction(rel[0], rel[1], np.linalg.norm(rel), R_S, side)
+        return 20.0 * np.array([lx, ly, 0.0])
+
+    # clearances D - R_s: UAV 0: A 11.0, B 71.8; UAV 1: A 13.9, B 46.0; UAV 2: A 38.1, B 18.3;
+    # UAV 3: A 71.8, B 11.0
+    expected = [tangent(0, 0, -1), tangent(0, 1, 1), tangent(1, 2, -1), tangent(1, 3, 1)]
+    np.testing.assert_allclose(out.reference_velocity[0], expected, rtol=1e-12)
+    # restore one at a time: A's guides pass abreast, B stays active and keeps its split
+    past_a = [(5.0, -10.0), (5.0, 20.0), (-50.0, 60.0), (-50.0, 100.0)]
+    state, out = step(past_a, state, avoidance=CONCURRENT)
+    np.testing.assert_array_equal(state.status[0], [DONE, ACTIVE])
+    np.testing.assert_array_equal(out.restored[0], [True, False])
+    expected = np.zeros((4, 4))
+    expected[[0, 0, 1, 1, 2, 2], [1, 2, 0, 2, 0, 1]] = 1.0  # B's side - {0, 1, 2} is complete
+    np.testing.assert_array_equal(out.adjacency[0], expected)
+    np.testing.assert_array_equal(out.groups[0], [1, 1, 1, 0])
+    assert out.active_obstacle[0] == 1
+
+
+def test_concurrent_equals_one_at_a_time_when_obstacles_never_overlap():
+    # far apart obstacles: the concurrent path gives the same outputs as the default one
+    far = (ObstacleConfig((0.0, 0.0)), ObstacleConfig((0.0, 150.0)))
+    rng = np.random.default_rng(3)
+    xy = rng.uniform((-80.0, -60.0), (20.0, 60.0), (6, 5, 2))
+    results = []
+    for concurrent in (False, True):
+        avoidance = AvoidanceConfig(obstacles=far, concurrent=concurrent)
+        state, out = step(xy, avoidance=avoidance)
+        state, out = step(xy + (30.0, 0.0), state, avoidance=avoidance)
+        results.append((snapshot(state), out))
+    (state_a, out_a), (state_b, out_b) = results
+    for name in state_a:
+        np.testing.assert_array_equal(state_a[name], state_b[name])
+    for name in ("adjacency", "groups", "reference_velocity", "avoiding", "active_obstacle"):
+        np.testing.assert_array_equal(getattr(out_a, name), getattr(out_b, name))
+    assert out_a.avoiding.any()

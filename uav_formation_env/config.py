@@ -267,8 +267,16 @@ class AvoidanceConfig:
     # UAVs this close to an obstacle's centre line join the other side's group if that avoids a
     # split (docs/deviations.md §6); 0 is the sign rule of docs/model.md [m]
     split_deadband: float = 5.0
+    # several obstacles may be active at once (docs/deviations.md §3): then only the safety
+    # circles must not overlap, and detection circles may; False: one at a time, as the paper
+    concurrent: bool = False
 
     def __post_init__(self) -> None:
+        _require(
+            isinstance(self.concurrent, bool),
+            "avoidance.concurrent",
+            f"must be true or false, got {self.concurrent!r}",
+        )
         _positive(self.safety_margin, "avoidance.safety_margin")
         _non_negative(self.split_deadband, "avoidance.split_deadband")
         _positive(self.detection_margin, "avoidance.detection_margin")
@@ -287,13 +295,20 @@ class AvoidanceConfig:
             for b in range(a + 1, len(self.obstacles)):
                 oa, ob = self.obstacles[a], self.obstacles[b]
                 gap = math.dist(oa.center, ob.center)
-                reach = oa.radius + ob.radius + 2 * self.detection_margin
+                reach = self.min_centre_distance(oa.radius, ob.radius)
+                circles = "safety" if self.concurrent else "detection"
                 _require(
                     gap >= reach,
                     "avoidance.obstacles",
-                    f"obstacles {a} and {b} overlap: their detection circles need centres "
+                    f"obstacles {a} and {b} overlap: their {circles} circles need centres "
                     f">= {reach:.1f} m apart, got {gap:.1f} m",
                 )
+
+    def min_centre_distance(self, radius_a: float, radius_b: float) -> float:
+        """Smallest distance between two obstacles' centres [m]: their detection circles may
+        not overlap, or, when ``concurrent``, their safety circles."""
+        margin = self.safety_margin if self.concurrent else self.detection_margin
+        return radius_a + radius_b + 2 * margin
 
     def safety_radius(self, obstacle: ObstacleConfig) -> float:
         """R_s of one obstacle [m]."""

@@ -20,6 +20,7 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.scenarios import (
     make_scenario,
     random_fields_scenario,
+    random_routes_scenario,
     random_swarm_scenario,
     swarm_scenario,
     windy_scenario,
@@ -204,6 +205,7 @@ SCENARIOS: dict[str, typing.Callable[[], Scenario]] = {
     "n8": lambda: make_scenario(n_uav=8),
     # templates: a scene drawn per reset (uav_formation_env.scenes.draw_scene)
     "random_fields": random_fields_scenario,
+    "random_routes": random_routes_scenario,
     "random_swarm": random_swarm_scenario,
     # large swarms, concrete
     "swarm_20": lambda: swarm_scenario(20),

@@ -150,7 +150,7 @@ def encode_observations(
     config = scenario.observation
     if config.kind == "local":
         field = sim.field
-        next_velocity, wait = next_leg(scenario.schedule, result.t)
+        next_velocity, wait = next_leg(sim.schedule, result.t)
         local = build_local_observations(
             result.z,
             result.reference_velocity,
@@ -446,7 +446,7 @@ class FormationEpisodes:
 
     def _left_corridor(self, result: StepResult) -> np.ndarray:
         centroid = result.z[..., :3].mean(axis=1)
-        off = route_error(self.scenario.schedule, result.t, centroid, self.route_start)
+        off = route_error(self.sim.schedule, result.t, centroid, self.route_start)
         return off > self.scenario.episode.corridor_width
 
     def _diverged(self, result: StepResult) -> np.ndarray:

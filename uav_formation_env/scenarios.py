@@ -11,6 +11,12 @@ Named scenarios of this module (registered in :data:`uav_formation_env.config_io
   radius 15-35 m centred along 10-90 % of the route, at most the V's half-width (40 m) to either
   side of it, so the preset route always passes within their detection distance and the
   formation has to avoid each of them.
+- ``random_routes`` (:func:`random_routes_scenario`): the paper's V and graph (N = 5) on a route
+  drawn each reset (3 to 5 legs of 20 m/s, each turning by up to ±90°, leg lengths in ratios of
+  30-70 s filling the 200 s) through 2 to 5 obstacles like ``random_fields``'s, half of them
+  placed near a turn; their detection circles may overlap (only the safety circles may not) and
+  several may be active at once (``avoidance.concurrent``); the local observation, which holds
+  the next leg.
 - ``random_swarm`` (:func:`random_swarm_scenario`): each reset draws N in 3..10, a shape of
   :data:`~uav_formation_env.formations.SHAPES` (10 m spacing, 4-nearest graph), a field like
   ``random_fields``'s, a constant horizontal wind of 0-0.3 m/s² in a uniform direction and
@@ -41,6 +47,7 @@ from uav_formation_env.config import (
     ObservationConfig,
     ObstacleConfig,
     ObstacleFieldConfig,
+    RouteConfig,
     Scenario,
     SceneConfig,
 )
@@ -205,6 +212,24 @@ def random_fields_scenario() -> Scenario:
     half_width = max(abs(row[1]) for row in base.formation.offsets)
     field = ObstacleFieldConfig(count=(1, 4), across=(-half_width, half_width))
     return replace(base, name="random_fields", scene=SceneConfig(obstacles=field))
+
+
+def random_routes_scenario() -> Scenario:
+    """The paper's formation on a drawn route through a dense field (module docstring)."""
+    base = Scenario()
+    half_width = max(abs(row[1]) for row in base.formation.offsets)
+    field = ObstacleFieldConfig(
+        count=(2, 5), across=(-half_width, half_width), near_turns=0.5, clear_start=150.0
+    )
+    scene = SceneConfig(route=RouteConfig(legs=(3, 5), turn=(-90.0, 90.0)), obstacles=field)
+    return replace(
+        base,
+        name="random_routes",
+        avoidance=replace(base.avoidance, concurrent=True),
+        scene=scene,
+        # the route is drawn: only the local layout carries the next leg to the policies
+        observation=ObservationConfig(kind="local"),
+    )
 
 
 def random_swarm_scenario() -> Scenario:

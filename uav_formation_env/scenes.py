@@ -30,6 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from uav_formation_env.config import (
+    AvoidanceConfig,
     DisturbanceConfig,
     FormationConfig,
     ObstacleConfig,
@@ -164,7 +165,7 @@ def _draw_disturbance(
 def _draw_obstacles(
     field: ObstacleFieldConfig,
     vertices: np.ndarray,
-    detection_margin: float,
+    avoidance: AvoidanceConfig,
     rng: np.random.Generator,
 ) -> tuple[ObstacleConfig, ...]:
     """An obstacle field along the route ``vertices`` (see :class:`ObstacleFieldConfig`).
@@ -202,7 +203,7 @@ def _draw_obstacles(
             near = field.near_turns > 0 and turns and tries < MAX_TRIES // 2
             if near and rng.random() < field.near_turns:
                 turn = turns[int(rng.integers(len(turns)))]
-                reach = radius + detection_margin  # the detection circle covers the turn
+                reach = radius + avoidance.detection_margin  # the detection circle covers it
                 s = float(np.clip(turn + rng.uniform(-reach, reach), low, high))
             else:
                 s = float(rng.uniform(low, high))
@@ -217,15 +218,16 @@ def _draw_obstacles(
             # min_gap: the drawn field passes its validation
             if all(
                 math.dist(centre, other.center)
-                >= radius + other.radius + 2 * detection_margin + field.min_gap
+                >= avoidance.min_centre_distance(radius, other.radius) + field.min_gap
                 for _, other in placed
             ):
                 placed.append((s, ObstacleConfig(centre, radius)))
                 break
         else:
+            circles = "safety" if avoidance.concurrent else "detection"
             raise ValueError(
                 "invalid scenario field 'scene.obstacles': could not place obstacle "
-                f"{k + 1} of {count} after {MAX_TRIES} tries (detection circles must not "
+                f"{k + 1} of {count} after {MAX_TRIES} tries ({circles} circles must not "
                 f"overlap and centres must be >= {field.clear_start} m from the route start); "
                 "widen along/across or lower count, radius, min_gap or clear_start"
             )
@@ -269,7 +271,7 @@ def draw_scene(scenario: Scenario, rng: np.random.Generator) -> Scenario:
         # the route starts at the start box's centre, the mean of the initial positions
         centre = (np.asarray(initial.position_low) + np.asarray(initial.position_high)) / 2
         vertices = route_polyline(schedule, centre, scenario.duration)
-        obstacles = _draw_obstacles(scene.obstacles, vertices, avoidance.detection_margin, rng)
+        obstacles = _draw_obstacles(scene.obstacles, vertices, avoidance, rng)
         avoidance = replace(avoidance, obstacles=obstacles)
     return replace(
         scenario,

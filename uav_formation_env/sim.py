@@ -39,6 +39,7 @@ from uav_formation_env.core.observer import (
     observer_step_held,
 )
 from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
+from uav_formation_env.core.reference import CopySchedules, Schedule, copy_schedules
 from uav_formation_env.scenes import max_gust_std, max_obstacles, n_uav_range, scene_of_seed
 from uav_formation_env.seeding import check_seed
 
@@ -101,13 +102,6 @@ def _scene_n_uav(scenario: Scenario, n_uav: int | None) -> int:
         if n_uav is not None and n_uav != scenario.n_uav:
             raise ValueError(f"n_uav={n_uav!r} differs from the scenario's {scenario.n_uav} UAVs")
         return scenario.n_uav
-    if scenario.scene.route is not None:
-        # every copy of a simulator follows one preset schedule today (topology, previews and
-        # the DMPC read it from the scenario); per-copy routes are drawn but not yet simulated
-        raise ValueError(
-            "scene.route: the simulator does not fly drawn routes yet; draw_scene() gives the "
-            "concrete scenario of a seed, which FormationSim can run"
-        )
     low, high = n_uav_range(scenario)
     if n_uav is None:
         if low != high:
@@ -168,6 +162,10 @@ class FormationSim:
             disturbance = replace(disturbance, gust_std=max_gust_std(scenario))
             self.copy_disturbance = CopyDisturbance.of(disturbance, B)
         self.disturbance = Disturbance(disturbance, N, self.dt)
+        # the preset schedule: the scenario's, or one drawn per copy (scene.route)
+        self.schedule: Schedule = scenario.schedule
+        if scenario.scene is not None and scenario.scene.route is not None:
+            self.schedule = copy_schedules([scenario.schedule] * B, scenario.scene.route.legs[1])
         self._shared_field: ObstacleField | None = None  # built on first use of `field`
         self._rows = np.arange(self.batch_size)
         self._n_steps = scenario.n_steps
@@ -258,6 +256,9 @@ class FormationSim:
         assert self.obstacles is not None and self.copy_disturbance is not None
         self.obstacles.set_copy(copy, scene.avoidance)
         self.copy_disturbance.set_copy(copy, scene.disturbance)
+        if isinstance(self.schedule, CopySchedules):
+            row = copy_schedules([scene.schedule], self.schedule.velocities.shape[1])
+            self.schedule.times[copy], self.schedule.velocities[copy] = row.times, row.velocities
 
     # ------------------------------------------------------------------ step
     def step(self, u_n: np.ndarray) -> StepResult:
@@ -325,7 +326,7 @@ class FormationSim:
             self.z[..., 3:],
             self.t,
             cfg.avoidance,
-            cfg.schedule,
+            self.schedule,
             self.base_adjacency,
             self.obstacles,
         )
@@ -405,6 +406,10 @@ class FormationSim:
             self.offsets[mask] = source.offsets[mask]
             self.base_adjacency[mask] = source.base_adjacency[mask]
             self.obstacles.take(mask, source.obstacles)
+            if isinstance(self.schedule, CopySchedules):
+                assert isinstance(source.schedule, CopySchedules)
+                self.schedule.times[mask] = source.schedule.times[mask]
+                self.schedule.velocities[mask] = source.schedule.velocities[mask]
             for name in ("amplitude", "wind", "gust_std"):
                 getattr(self.copy_disturbance, name)[mask] = getattr(source.copy_disturbance, name)[
                     mask
@@ -467,7 +472,7 @@ class FormationSim:
         """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held)."""
         assert self.last is not None, "call reset() first"
         return topology.reference_preview(
-            self.scenario.schedule,
+            self.schedule,
             self.t,
             self.dt,
             self.scenario.cost.horizon,

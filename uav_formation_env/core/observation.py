@@ -192,7 +192,7 @@ def require_decodable(scenario, policy: str) -> None:
     The reference DMPC and the heuristic decode the full layout above with the mission data
     (formation offsets) of the scenario, or the N-independent local layout
     (:mod:`uav_formation_env.core.local_observation`), which carries the relative offsets itself.
-    A scene that draws the formation per reset needs the local layout.
+    A scene that draws the formation or the route per reset needs the local layout.
 
     Args:
         scenario: a :class:`~uav_formation_env.config.Scenario`.
@@ -205,6 +205,12 @@ def require_decodable(scenario, policy: str) -> None:
             f"{policy} reads the formation of the full observation from the scenario, but "
             f"scenario {scenario.name!r} draws it per reset (scene.n_uav / scene.shapes); use "
             "observation.kind='local'"
+        )
+    if scenario.observation.kind == "full" and scene is not None and scene.route is not None:
+        raise ValueError(
+            f"{policy} reads the preset route of the full observation from the scenario, but "
+            f"scenario {scenario.name!r} draws it per reset (scene.route); use "
+            "observation.kind='local' (it holds the next leg)"
         )
 
 

@@ -2,11 +2,17 @@
 
 See docs/model.md §4.3 for the preview: the schedule at t + kδ, or the current reference held while
 avoiding.
+
+A schedule is either one :class:`~uav_formation_env.config.ScheduleConfig` shared by every copy,
+or a :class:`CopySchedules` with one (drawn) schedule per copy (scene distributions with
+``scene.route``). Every function here takes both; with :class:`CopySchedules` the times ``t``
+carry the copy axis first, (B, ...).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from functools import lru_cache, wraps
 from typing import TypeVar
 
@@ -15,7 +21,10 @@ import numpy as np
 from uav_formation_env.config import ScheduleConfig
 
 __all__ = [
+    "CopySchedules",
+    "Schedule",
     "config_cache",
+    "copy_schedules",
     "next_leg",
     "preset_displacement",
     "preset_velocity",
@@ -70,47 +79,123 @@ def schedule_arrays(schedule: ScheduleConfig) -> tuple[np.ndarray, np.ndarray]:
     return times, velocities
 
 
-def preset_velocity(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True)
+class CopySchedules:
+    """One preset schedule per copy, padded to a common number of legs.
+
+    A copy with fewer legs repeats its last switching time (0 s if it has none) and its last
+    velocity: the padding legs have zero length and every rule of eq. 23 is unchanged.
+
+    Attributes:
+        times: (B, K) switching times [s], non-decreasing along K.
+        velocities: (B, K+1, 3) leg velocities [m/s].
+    """
+
+    times: np.ndarray
+    velocities: np.ndarray
+
+    @property
+    def batch(self) -> int:
+        return self.times.shape[0]
+
+
+Schedule = ScheduleConfig | CopySchedules
+
+
+def copy_schedules(schedules: Sequence[ScheduleConfig], legs: int | None = None) -> CopySchedules:
+    """Stack per-copy schedules (see :class:`CopySchedules`).
+
+    Args:
+        schedules: B schedules.
+        legs: pad to this many legs (K + 1); default: the most legs of ``schedules``.
+    """
+    most = max(len(s.velocities) for s in schedules)
+    legs = most if legs is None else legs
+    if legs < most:
+        raise ValueError(f"legs={legs} is fewer than a schedule's {most} legs")
+    times = np.empty((len(schedules), legs - 1))
+    velocities = np.empty((len(schedules), legs, 3))
+    for b, schedule in enumerate(schedules):
+        t, v = schedule_arrays(schedule)
+        times[b, : len(t)], times[b, len(t) :] = t, t[-1] if len(t) else 0.0
+        velocities[b, : len(v)], velocities[b, len(v) :] = v, v[-1]
+    return CopySchedules(times, velocities)
+
+
+def _leg(schedule: Schedule, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The leg index of eq. 23 at t (the number of switching times before t - tol), with the
+    schedule's times and velocities broadcast against t.
+
+    Returns:
+        ``(index, times, velocities)``: (...) int; (..., K) [s]; (..., K+1, 3) [m/s].
+    """
+    t = np.asarray(t, dtype=float)
+    if isinstance(schedule, ScheduleConfig):
+        times, velocities = schedule_arrays(schedule)
+        return times.searchsorted(t - _TIME_TOL, side="left"), times, velocities
+    if t.ndim == 0 or t.shape[0] != schedule.batch:
+        raise ValueError(
+            f"t must have the copy axis first, (B={schedule.batch}, ...), got shape {t.shape}"
+        )
+    lead = (schedule.batch,) + (1,) * (t.ndim - 1)
+    times = schedule.times.reshape(*lead, -1)
+    velocities = schedule.velocities.reshape(*lead, -1, 3)
+    index = (times < (t - _TIME_TOL)[..., None]).sum(axis=-1)  # searchsorted(side="left")
+    return index, times, velocities
+
+
+def _take_leg(velocities: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """velocities[..., index, :] per element: (K+1, 3) or (..., K+1, 3) -> (..., 3)."""
+    if velocities.ndim == 2:
+        return velocities.take(index, axis=0)  # a new array even for scalar t
+    velocities = np.broadcast_to(velocities, (*index.shape, *velocities.shape[-2:]))
+    return np.take_along_axis(velocities, index[..., None, None], axis=-2)[..., 0, :]
+
+
+def preset_velocity(schedule: Schedule, t: np.ndarray) -> np.ndarray:
     """Preset desired velocity of eq. 23.
 
     ``velocities[k]`` holds for ``times[k-1] < t <= times[k]``; t <= times[0] gives the first
     entry and t > times[-1] the last.
 
     Args:
-        schedule: switching times and velocities.
+        schedule: switching times and velocities (per copy: ``t`` is (B, ...)).
         t: (...) time [s].
 
     Returns:
         (..., 3) velocity [m/s].
     """
-    times, velocities = schedule_arrays(schedule)
-    index = times.searchsorted(np.asarray(t, dtype=float) - _TIME_TOL, side="left")
-    return velocities.take(index, axis=0)  # a new array even for scalar t
+    index, _, velocities = _leg(schedule, t)
+    return _take_leg(velocities, index)
 
 
-def next_leg(schedule: ScheduleConfig, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def next_leg(schedule: Schedule, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The preset velocity of the next leg and the time until it starts (the same leg rule as
     :func:`preset_velocity`).
 
     Args:
-        schedule: switching times and velocities.
+        schedule: switching times and velocities (per copy: ``t`` is (B, ...)).
         t: (...) time [s].
 
     Returns:
         ``(velocity, wait)``: (..., 3) [m/s] and (...) [s]; on the last leg, its own velocity and
         0 s.
     """
-    times, velocities = schedule_arrays(schedule)
     t = np.asarray(t, dtype=float)
-    index = times.searchsorted(t - _TIME_TOL, side="left")  # the current leg
-    last = len(times)  # index of the last leg
+    index, times, velocities = _leg(schedule, t)  # index: the current leg
+    last = times.shape[-1]  # index of the last leg
     if last == 0:
-        return velocities.take(index, axis=0), np.zeros(t.shape)
-    switch = np.where(index < last, times.take(np.minimum(index, last - 1)), t)
-    return velocities.take(np.minimum(index + 1, last), axis=0), np.maximum(switch - t, 0.0)
+        return _take_leg(velocities, index), np.zeros(t.shape)
+    if times.ndim == 1:
+        switch_time = times.take(np.minimum(index, last - 1))
+    else:
+        times = np.broadcast_to(times, (*index.shape, last))
+        switch_time = np.take_along_axis(times, np.minimum(index, last - 1)[..., None], -1)[..., 0]
+    switch = np.where(index < last, switch_time, t)
+    return _take_leg(velocities, np.minimum(index + 1, last)), np.maximum(switch - t, 0.0)
 
 
-def preset_displacement(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
+def preset_displacement(schedule: Schedule, t: np.ndarray) -> np.ndarray:
     """Integral of the preset velocity (eq. 23) from 0 to t: where the preset route has gone.
 
     Exact for the piecewise-constant schedule: leg k holds on ``(times[k-1], times[k]]`` (leg 0
@@ -118,30 +203,34 @@ def preset_displacement(schedule: ScheduleConfig, t: np.ndarray) -> np.ndarray:
     ``[0, t]`` it covers.
 
     Args:
-        schedule: switching times and velocities.
+        schedule: switching times and velocities (per copy: ``t`` is (B, ...)).
         t: (...) time [s], >= 0.
 
     Returns:
         (..., 3) displacement [m].
     """
-    times, velocities = schedule_arrays(schedule)
+    _, times, velocities = _leg(schedule, t)
     t = np.asarray(t, dtype=float)[..., None]  # (..., 1)
-    start = np.concatenate(([0.0], np.maximum(times, 0.0)))  # (K+1,) leg k starts
-    end = np.concatenate((np.maximum(times, 0.0), [np.inf]))  # (K+1,) and ends
+    edges = np.maximum(times, 0.0)
+    zero = np.zeros((*edges.shape[:-1], 1))
+    start = np.concatenate((zero, edges), axis=-1)  # (..., K+1) leg k starts
+    end = np.concatenate((edges, zero + np.inf), axis=-1)  # (..., K+1) and ends
     covered = np.clip(t, start, end) - start  # (..., K+1) [s]
-    return covered @ velocities
+    if velocities.ndim == 2:
+        return covered @ velocities
+    return (covered[..., None] * velocities).sum(axis=-2)
 
 
 def route_error(
-    schedule: ScheduleConfig, t: np.ndarray, centroid: np.ndarray, start: np.ndarray
+    schedule: Schedule, t: np.ndarray, centroid: np.ndarray, start: np.ndarray
 ) -> np.ndarray:
     """Horizontal distance of the formation centroid from the preset route.
 
-    The preset route is ``start`` (the centroid at t = 0) plus :func:`preset_displacement`: where
-    the formation would be had it flown the preset velocity of eq. 23 exactly, without avoidance.
+    The preset route is ``start`` plus :func:`preset_displacement`: where the formation would be
+    had it flown the preset velocity of eq. 23 exactly, without avoidance.
 
     Args:
-        schedule: the preset velocity.
+        schedule: the preset velocity (per copy: ``t`` is (B, ...)).
         t: (...) time [s], broadcastable against the leading axes of ``centroid``.
         centroid: (..., 3) formation centroid [m].
         start: (..., 3) centroid at t = 0 [m].
@@ -155,7 +244,7 @@ def route_error(
 
 
 def reference_preview(
-    schedule: ScheduleConfig,
+    schedule: Schedule,
     t: np.ndarray,
     dt: float,
     horizon: int,
@@ -165,7 +254,7 @@ def reference_preview(
     """Desired velocity v^d(t + kδ) over the prediction horizon (docs/model.md §4.3).
 
     Args:
-        schedule: preset velocity (eq. 23).
+        schedule: preset velocity (eq. 23), shared or per copy.
         t: (B,) or scalar current time [s].
         dt: control step δ [s].
         horizon: H, number of steps; k = 0..H.

@@ -16,7 +16,9 @@ call runs three phases in this order:
    min_i D_i < d^o (both swarm-wide: the UAV in range need not be the nearest one). At most one
    obstacle is active per copy: candidates wait while another obstacle is active, and an obstacle
    restored in this update frees the copy only from the next update on. If several obstacles are
-   candidates at once, the one with the smallest min_i D_i wins (ties: lowest index). At
+   candidates at once, the one with the smallest min_i D_i wins (ties: lowest index). With
+   ``avoidance.concurrent`` every candidate activates, whatever else is active (the joint rule of
+   :func:`_avoidance_output`). At
    activation every UAV gets its side s_i = +1 if λ_lat >= 0 else -1, fixed until the obstacle is
    done. Case 1 (all sides equal): one group. Case 2: Σ+ and Σ-.
 2. **Guides and ends.** Group slot 0 holds side +1, slot 1 side -1 (in case 1 the unused slot is
@@ -63,7 +65,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uav_formation_env.config import AvoidanceConfig, ScheduleConfig
+from uav_formation_env.config import AvoidanceConfig
 from uav_formation_env.core.obstacles import (
     ObstacleField,
     choose_sides,
@@ -76,7 +78,7 @@ from uav_formation_env.core.obstacles import (
     relative_geometry,
     tangent_direction,
 )
-from uav_formation_env.core.reference import preset_velocity, reference_preview
+from uav_formation_env.core.reference import Schedule, preset_velocity, reference_preview
 
 __all__ = [
     "ACTIVE",
@@ -208,7 +210,7 @@ def update_topology(
     velocities: np.ndarray,
     t: np.ndarray,
     avoidance: AvoidanceConfig,
-    schedule: ScheduleConfig,
+    schedule: Schedule,
     base_adjacency: np.ndarray,
     obstacles: ObstacleField | None = None,
 ) -> tuple[TopologyState, TopologyOutput]:
@@ -224,7 +226,7 @@ def update_topology(
         velocities: (B, N, 3) UAV velocities [m/s] (used by ``reference_speed="current"``).
         t: (B,) or scalar current time [s].
         avoidance: obstacles, margins and the reference-speed rule.
-        schedule: preset velocity (eq. 23).
+        schedule: preset velocity (eq. 23), shared or per copy.
         base_adjacency: (N, N) H0 shared by every copy, or (B, N, N) per copy; row = receiver.
         obstacles: per-copy obstacles (scene distributions); None: ``avoidance.obstacles`` in
             every copy. The margins and rules always come from ``avoidance``.
@@ -279,12 +281,16 @@ def update_topology(
     activation_time = _batch_last(state.activation_time)
     restore_time = _batch_last(state.restore_time)
 
-    # 1. activation: at most one active obstacle per copy, the nearest candidate wins
+    # 1. activation: every candidate when concurrent; else at most one active obstacle per copy,
+    # the nearest candidate wins
     min_dist = dist.min(axis=1)  # (O, B)
-    busy = (status == ACTIVE).any(axis=0)  # (B,)
-    candidate = (status == IDLE) & near.any(axis=1) & (min_dist < r_detect_b) & ~busy & present
-    chosen = _first_argmin(np.where(candidate, min_dist, np.inf), axis=0)  # (B,)
-    activated = candidate & (np.arange(n_obs)[:, None] == chosen)  # (O, B)
+    candidate = (status == IDLE) & near.any(axis=1) & (min_dist < r_detect_b) & present
+    if avoidance.concurrent:
+        activated = candidate
+    else:
+        candidate &= ~(status == ACTIVE).any(axis=0)  # a busy copy waits
+        chosen = _first_argmin(np.where(candidate, min_dist, np.inf), axis=0)  # (B,)
+        activated = candidate & (np.arange(n_obs)[:, None] == chosen)  # (O, B)
     if activated.any():
         new_side, one_group = choose_sides(lat, avoidance.split_deadband)
         side = np.where(activated[:, None], new_side, side)
@@ -364,11 +370,17 @@ def _avoidance_output(
     preset: np.ndarray,
     avoidance: AvoidanceConfig,
 ) -> None:
-    """Fill ``output`` (in place) for the copies with an active obstacle.
+    """Fill ``output`` (in place) for the copies with at least one active obstacle.
+
+    With several active obstacles (``avoidance.concurrent``) the sub-formations are the cells of
+    the joint split: i and j stay linked iff they are on the same side of every active obstacle.
+    A UAV whose group of some active obstacle is guided (guide set, not ended) follows the tangent
+    of the guided obstacle it is closest to (smallest D - R_s; ties: lowest index). With one
+    active obstacle this is the single-obstacle rule of the module docstring.
 
     Args:
         output: idle outputs of this update, modified in place.
-        active: (O, B) bool, at most one True per copy.
+        active: (O, B) bool.
         side, guide, ended, case: batch-last state, (O, N, B), (O, 2, B), (O, 2, B), (O, B).
         geometry: rel_x, rel_y, dist (O, N, B) [m] and R_s (O, 1, B) [m].
         velocities: (B, N, 3) [m/s].
@@ -378,38 +390,47 @@ def _avoidance_output(
     rel_x, rel_y, dist, r_safe = geometry
     n_obs, n_uav, batch = side.shape
     has_active = active.any(axis=0)  # (B,)
-    a = _first_argmin(np.where(active, 0, 1), axis=0)  # (B,) index of the active obstacle
-    cols = np.arange(batch)
-    side_a = side[a, :, cols]  # (B, N)
-    guide_a = guide[a, :, cols]  # (B, 2)
-    follow = has_active[:, None] & (guide_a >= 0) & ~ended[a, :, cols]  # (B, 2)
-    minus = side_a < 0  # (B, N): member of group slot 1
-
-    same = (side_a[:, :, None] == side_a[:, None, :]) & ~np.eye(n_uav, dtype=bool)
-    output.adjacency[has_active] = same[has_active]
-    split = has_active & (case[a, cols] == 2)
-    output.groups = (split[:, None] & minus).astype(np.int64)
-    output.active_obstacle = np.where(has_active, a, -1).astype(np.int64)
-    avoiding = np.where(minus, follow[:, 1:], follow[:, :1])  # (B, N)
-    output.avoiding = avoiding
+    minus = side < 0  # (O, N, B): member of group slot 1 of that obstacle
+    # 1. H: complete inside each cell of the joint split of the active obstacles
+    differ = (side[:, :, None] != side[:, None, :]) & active[:, None, None]  # (O, N, N, B)
+    same = ~differ.any(axis=0) & ~np.eye(n_uav, dtype=bool)[:, :, None]  # (N, N, B)
+    output.adjacency[has_active] = _batch_first(same)[has_active]
+    # groups: bit r set when on side -1 of the r-th split (case 2) active obstacle of the copy
+    split = active & (case == 2)  # (O, B)
+    rank = np.cumsum(split, axis=0) - 1  # (O, B)
+    bits = np.where(split[:, None] & minus, 2 ** np.maximum(rank, 0)[:, None], 0)  # (O, N, B)
+    output.groups = np.ascontiguousarray(bits.sum(axis=0).T).astype(np.int64)
+    output.active_obstacle = np.where(
+        has_active, _first_argmin(np.where(active, 0, 1), axis=0), -1
+    ).astype(np.int64)
+    # 2. who follows which obstacle's guide
+    follow = active[:, None] & (guide >= 0) & ~ended  # (O, 2, B)
+    guided = np.where(minus, follow[:, 1:], follow[:, :1])  # (O, N, B)
+    avoiding = guided.any(axis=0)  # (N, B)
+    output.avoiding = np.ascontiguousarray(avoiding.T)
     if not avoiding.any():
         return
-
-    g = np.maximum(guide_a, 0)  # (B, 2)
-    at = (a[:, None], g, cols[:, None])
-    r_guide = r_safe[a, 0, cols][:, None]  # (B, 1) R_s of each copy's active obstacle
-    lx, ly = tangent_direction(rel_x[at], rel_y[at], dist[at], r_guide, _SLOT_SIDES)
+    clearance = np.where(guided, dist - r_safe, np.inf)  # (O, N, B)
+    chosen = _first_argmin(clearance, axis=0)  # (N, B)
+    # 3. each group's tangent, then each UAV's from its chosen obstacle and group
+    g = np.maximum(guide, 0)  # (O, 2, B)
+    obs_index = np.arange(n_obs)[:, None, None]
+    cols = np.arange(batch)
+    at = (obs_index, g, cols)
+    lx, ly = tangent_direction(rel_x[at], rel_y[at], dist[at], r_safe, _SLOT_SIDES[:, None])
     if avoidance.reference_speed == "preset":
-        speed = np.sqrt((preset**2).sum(axis=1))[:, None]  # (B, 1)
+        speed = np.sqrt((preset**2).sum(axis=1))  # (B,), broadcast against (O, 2, B)
     else:
-        g_vel = velocities[cols[:, None], g]  # (B, 2, 3)
-        speed = np.sqrt((g_vel**2).sum(axis=2))
-        speed = np.maximum(speed, avoidance.min_reference_speed)  # (B, 2)
-    vx, vy = speed * lx, speed * ly  # (B, 2)
+        g_vel = velocities[cols, g]  # (O, 2, B, 3)
+        speed = np.maximum(np.sqrt((g_vel**2).sum(axis=3)), avoidance.min_reference_speed)
+    vx, vy = speed * lx, speed * ly  # (O, 2, B)
+    slot = minus[chosen, np.arange(n_uav)[:, None], cols].astype(np.intp)  # (N, B)
+    ux, uy = vx[chosen, slot, cols].T, vy[chosen, slot, cols].T  # (B, N)
+    take = output.avoiding
     reference = output.reference_velocity
-    reference[..., 0] = np.where(avoiding, np.where(minus, vx[:, 1:], vx[:, :1]), reference[..., 0])
-    reference[..., 1] = np.where(avoiding, np.where(minus, vy[:, 1:], vy[:, :1]), reference[..., 1])
-    reference[..., 2] = np.where(avoiding, 0.0, reference[..., 2])
+    reference[..., 0] = np.where(take, ux, reference[..., 0])
+    reference[..., 1] = np.where(take, uy, reference[..., 1])
+    reference[..., 2] = np.where(take, 0.0, reference[..., 2])
 
 
 def _first_argmin(values: np.ndarray, axis: int) -> np.ndarray:

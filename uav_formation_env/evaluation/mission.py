@@ -30,7 +30,14 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.obstacles import obstacle_field
-from uav_formation_env.core.reference import preset_displacement, preset_velocity, route_error
+from uav_formation_env.core.reference import (
+    CopySchedules,
+    Schedule,
+    copy_schedules,
+    preset_displacement,
+    preset_velocity,
+    route_error,
+)
 
 # two-sided 95 % Student t quantiles for 1..30 degrees of freedom
 _T95 = (
@@ -102,18 +109,35 @@ class MissionMetrics:
         return reasons
 
 
-def preset_route(scenario: Scenario, t: np.ndarray, start: np.ndarray) -> np.ndarray:
+def preset_route(
+    scenario: Scenario,
+    t: np.ndarray,
+    start: np.ndarray,
+    scenes: Sequence[Scenario] | None = None,
+) -> np.ndarray:
     """Positions of the preset route: ``start`` plus the integral of the preset velocity.
 
     Args:
         scenario: its schedule (eq. 23).
         t: (T,) times [s].
         start: (B, 3) route position at t = 0 (the formation centroid) [m].
+        scenes: the concrete scenario of each copy: their own (drawn) schedules.
 
     Returns:
         (T, B, 3) [m].
     """
-    return start[None] + preset_displacement(scenario.schedule, t)[:, None, :]
+    schedule = _schedule(scenario, scenes)
+    if isinstance(schedule, CopySchedules):
+        times = np.broadcast_to(np.asarray(t, dtype=float), (schedule.batch, len(t)))
+        return start[None] + preset_displacement(schedule, times).transpose(1, 0, 2)
+    return start[None] + preset_displacement(schedule, t)[:, None, :]
+
+
+def _schedule(scenario: Scenario, scenes: Sequence[Scenario] | None) -> Schedule:
+    """The scenario's schedule, or the scenes' own when they differ (drawn routes)."""
+    if scenes is None or all(s.schedule == scenario.schedule for s in scenes):
+        return scenario.schedule
+    return copy_schedules([s.schedule for s in scenes])
 
 
 def _segment_distance(points: np.ndarray, centre: np.ndarray) -> np.ndarray:
@@ -157,9 +181,16 @@ def mission_metrics(
     t = np.asarray(t, dtype=float)
     p, v = z[..., :3], z[..., 3:]
     centroid = p.mean(axis=2)  # (T+1, B, 3)
-    route = preset_route(scenario, t, centroid[0])
-    off_route = route_error(scenario.schedule, t[:, None], centroid, centroid[0])  # (T+1, B)
-    v_preset = preset_velocity(scenario.schedule, t)[:, None, None, :]
+    route = preset_route(scenario, t, centroid[0], scenes)  # (T+1, B, 3)
+    schedule = _schedule(scenario, scenes)
+    if isinstance(schedule, CopySchedules):  # per-copy schedules take the copy axis first
+        times = np.broadcast_to(t, (schedule.batch, len(t)))
+        start = centroid[0][:, None]  # (B, 1, 3)
+        off_route = route_error(schedule, times, centroid.transpose(1, 0, 2), start).T
+        v_preset = preset_velocity(schedule, times).transpose(1, 0, 2)[:, :, None, :]
+    else:
+        off_route = route_error(schedule, t[:, None], centroid, centroid[0])  # (T+1, B)
+        v_preset = preset_velocity(schedule, t)[:, None, None, :]
     velocity_error2 = ((v - v_preset) ** 2).sum(axis=-1)  # (T+1, B, N)
 
     batch = z.shape[1]

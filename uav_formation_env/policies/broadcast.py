@@ -34,6 +34,7 @@ from uav_formation_env.core.cost import (
 )
 from uav_formation_env.core.local_observation import DecodedLocalObservation, slot_frame
 from uav_formation_env.core.observation import DecodedObservation, others_index
+from uav_formation_env.core.reference import CopySchedules
 
 __all__ = [
     "HorizonProblems",
@@ -71,6 +72,30 @@ def observed_time(time_fraction: np.ndarray, duration: float, dt: float) -> np.n
         (...) ``round(t / δ) δ``, the same float the simulator computes as ``steps * δ``.
     """
     return np.round(np.asarray(time_fraction, dtype=float) * duration / dt) * dt
+
+
+# the switching times the local observation implies are snapped to this grid [s]: the float32
+# slots carry about 3e-5 s of rounding at t = 200 s, which would move a switch at t = 50 s off
+# the control grid; a drawn switch time lies within 5e-5 s of a grid point with p = 5e-4
+SWITCH_TIME_GRID = 1e-4
+
+
+def observed_schedule(decoded: DecodedLocalObservation, now: np.ndarray) -> CopySchedules:
+    """Each UAV's preset schedule as far as its local observation tells: the current preset
+    velocity until ``now + time_to_switch``, then the next leg's (one B·N copy per UAV).
+
+    Enough for any preview shorter than a leg; the reference of an avoiding UAV is its tangent
+    reference, which :func:`~uav_formation_env.core.reference.reference_preview` holds anyway.
+
+    Args:
+        decoded: (B, N) decoded local observations.
+        now: (B·N,) each UAV's observed time [s].
+    """
+    switch = np.round((now + decoded.time_to_switch.reshape(-1)) / SWITCH_TIME_GRID)
+    legs = np.stack([decoded.reference_velocity, decoded.next_velocity], axis=-2)
+    return CopySchedules(
+        times=(switch * SWITCH_TIME_GRID)[:, None], velocities=legs.reshape(-1, 2, 3)
+    )
 
 
 @dataclass(frozen=True)
@@ -182,10 +207,13 @@ def horizon_problems(
     """
     dt, horizon = scenario.dynamics.dt, scenario.cost.horizon
     batch, n = decoded.velocity.shape[:2]
+    now = observed_time(decoded.time_fraction, scenario.duration, dt).reshape(-1)
     # Each UAV's own time, reference and avoiding flag: a batch of B·N single-UAV previews.
     preview = topology.reference_preview(
-        scenario.schedule,
-        observed_time(decoded.time_fraction, scenario.duration, dt).reshape(-1),
+        observed_schedule(decoded, now)
+        if isinstance(decoded, DecodedLocalObservation)
+        else scenario.schedule,
+        now,
         dt,
         horizon,
         decoded.reference_velocity.reshape(-1, 1, 3),
