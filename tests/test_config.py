@@ -529,3 +529,34 @@ def test_registered_scenarios_build_and_round_trip(name: str, tmp_path: Path) ->
     path = tmp_path / f"{name}.yaml"
     save_scenario(scenario, path)
     assert load_scenario(path) == scenario
+
+
+def test_sparse_graph_edge_list_in_yaml(tmp_path: Path) -> None:
+    # receiver, sender pairs: UAV 0 leads, 1 and 2 receive from it, 2 also from 1
+    offsets = [[0.0] * 6, [-10.0, 10.0, 0, 0, 0, 0], [-10.0, -10.0, 0, 0, 0, 0]]
+    edges = {"edges": [[1, 0], [2, 0], [2, 1]]}
+    sparse = scenario_from_dict({"formation": {"offsets": offsets, "adjacency": edges}})
+    assert sparse.formation.adjacency == ((0, 0, 0), (1, 0, 0), (1, 1, 0))
+    with pytest.raises(ValueError, match=r"'formation\.adjacency\.edgs'"):
+        scenario_from_dict({"formation": {"offsets": offsets, "adjacency": {"edgs": []}}})
+    with pytest.raises(ValueError, match=r"'formation\.adjacency\.edges\[1\]'.*0\.\.2.*\[2, 3\]"):
+        bad = {"edges": [[1, 0], [2, 3]]}
+        scenario_from_dict({"formation": {"offsets": offsets, "adjacency": bad}})
+    with pytest.raises(ValueError, match=r"formation\.adjacency.*spanning tree"):
+        scenario_from_dict({"formation": {"offsets": offsets, "adjacency": {"edges": [[1, 0]]}}})
+
+
+def test_large_formations_are_saved_as_edge_lists(tmp_path: Path) -> None:
+    from uav_formation_env.config_io import SPARSE_GRAPH_MIN_UAVS
+    from uav_formation_env.scenarios import swarm_scenario
+
+    large, small = swarm_scenario(SPARSE_GRAPH_MIN_UAVS), swarm_scenario(SPARSE_GRAPH_MIN_UAVS - 1)
+    for scenario, sparse in ((large, True), (small, False)):
+        path = tmp_path / f"{scenario.n_uav}.yaml"
+        save_scenario(scenario, path)
+        stored = yaml.safe_load(path.read_text())["formation"]["adjacency"]
+        assert isinstance(stored, dict) is sparse
+        assert load_scenario(path) == scenario
+    stored = yaml.safe_load((tmp_path / f"{large.n_uav}.yaml").read_text())
+    edges = stored["formation"]["adjacency"]["edges"]
+    assert len(edges) == int(np.asarray(large.formation.adjacency).sum())
