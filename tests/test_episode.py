@@ -263,3 +263,27 @@ def test_leaving_the_corridor_costs_the_corridor_penalty() -> None:
     assert step.left_corridor[0]
     np.testing.assert_array_equal(step.penalty, np.full((1, 5), 1e6))
     np.testing.assert_allclose(step.reward, -(step.cost + 1e6))
+
+
+def test_the_step_pair_distances_are_reused_only_for_the_step_own_result():
+    from uav_formation_env.core.cost.stage import pair_distances
+    from uav_formation_env.episode import encode_observations
+
+    scenario = resolve_scenario("swarm_20")
+    episodes = FormationEpisodes(scenario, 3)
+    episodes.reset(seed=0)
+    sim = episodes.sim
+    step = episodes.step(np.random.default_rng(0).uniform(-1, 1, (3, 20, 3)))
+    assert sim.pair_distances_of(step.result) is sim._pair_of[1]  # one pass this step
+    # a result merged from two (partial reset) gets its own distances
+    merged = sim.reset(seed=[7], mask=np.array([False, True, False]))
+    shifted = type(merged)(**{**merged.__dict__, "z": merged.z + 1.0})
+    assert sim.pair_distances_of(shifted) is not sim._pair_of[1]
+    np.testing.assert_array_equal(
+        sim.pair_distances_of(shifted), pair_distances(shifted.z[..., :3])
+    )
+    obs, index = encode_observations(sim, merged)
+    sim._pair_of = (None, sim._pair_of[1])  # force the recomputation
+    fresh, fresh_index = encode_observations(sim, merged)
+    np.testing.assert_array_equal(obs, fresh)
+    np.testing.assert_array_equal(index, fresh_index)

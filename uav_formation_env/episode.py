@@ -169,6 +169,7 @@ def encode_observations(
             mirrored=scenario.formation.mirrored_offsets,
             next_velocity=next_velocity,
             time_to_switch=wait,
+            distance=sim.pair_distances_of(result),
         )
         return local.obs, local.neighbour_index
     full = build_observations(

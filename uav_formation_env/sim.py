@@ -182,6 +182,8 @@ class FormationSim:
         self.observer: ObserverState = observer_init(self.z[..., 3:])
         self.topology = topology.init_topology(B, N, self.obstacle_radii.shape[-1])
         self.last: StepResult | None = None  # None until the first reset
+        # the states of the last step's result and their pair distances (see pair_distances_of)
+        self._pair_of: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros((B, N, N)))
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> StepResult:
@@ -354,8 +356,10 @@ class FormationSim:
             if cfg.observer.enabled
             else np.zeros_like(d)
         )
+        z = self.z.copy()
+        self._pair_of = (z, pair)
         return StepResult(
-            z=self.z.copy(),
+            z=z,
             u_n=u_n,
             u_d=u_d,
             u_applied=u,
@@ -467,6 +471,13 @@ class FormationSim:
             centre = topology.obstacle_distances(p, self.obstacles)
             surface = np.minimum.reduce(centre - self.obstacles.radii[:, None], axis=-1)
         return np.minimum.reduce(pair, axis=-1), surface
+
+    def pair_distances_of(self, result: StepResult) -> np.ndarray:
+        """(B, N, N) UAV-UAV distances of ``result.z`` [m] (+inf on the diagonal): the matrix
+        this step computed for the separation term when ``result`` is the step's own result
+        (one all-pairs pass per step instead of two), else computed now."""
+        z, pair = self._pair_of
+        return pair if z is result.z else pair_distances(result.z[..., :3])
 
     def reference_preview(self) -> np.ndarray:
         """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held)."""

@@ -233,6 +233,7 @@ def build_local_observations(
     next_velocity: np.ndarray | None = None,
     time_to_switch: np.ndarray | None = None,
     nearest: int = 2,
+    distance: np.ndarray | None = None,
 ) -> LocalObservations:
     """Every agent's local observation (length independent of N).
 
@@ -256,6 +257,8 @@ def build_local_observations(
         time_to_switch: (B,) time until the next leg starts [s]; None: 0.
         nearest: proximity slots after the k neighbour slots, >= 0: the nearest UAVs not in a
             neighbour slot.
+        distance: (B, N, N) :func:`~uav_formation_env.core.cost.stage.pair_distances` of ``z``,
+            if the caller has them; computed here otherwise.
 
     Returns:
         :class:`LocalObservations` with obs (B, N, dim) and neighbour_index (B, N, k + nearest).
@@ -280,7 +283,8 @@ def build_local_observations(
     raw[..., 18] = 0.0 if time_to_switch is None else np.asarray(time_to_switch)[:, None]
 
     # neighbour slots, then proximity slots
-    distance = pair_distances(z[..., :3])
+    if distance is None:
+        distance = pair_distances(z[..., :3])
     key = _neighbour_keys(distance, adjacency)
     index = _k_smallest(key, k)  # (B, N, min(k, N)); the UAV itself only in column N - 1
     neighbour_index = np.full((batch, n_uav, slots_count), -1, dtype=np.int64)
