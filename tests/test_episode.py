@@ -269,7 +269,8 @@ def test_the_step_pair_distances_are_reused_only_for_the_step_own_result():
     from uav_formation_env.core.cost.stage import pair_distances
     from uav_formation_env.episode import encode_observations
 
-    scenario = resolve_scenario("swarm_20")
+    # all pairs (swarm_20 senses within a radius: tests/test_proximity.py)
+    scenario = with_overrides(resolve_scenario("swarm_20"), {"observation.sensing_radius": None})
     episodes = FormationEpisodes(scenario, 3)
     episodes.reset(seed=0)
     sim = episodes.sim

@@ -614,3 +614,23 @@ def test_concurrent_equals_one_at_a_time_when_obstacles_never_overlap():
     for name in ("adjacency", "groups", "reference_velocity", "avoiding", "active_obstacle"):
         np.testing.assert_array_equal(getattr(out_a, name), getattr(out_b, name))
     assert out_a.avoiding.any()
+
+
+@pytest.mark.parametrize("rearm", [False, True])
+def test_a_done_obstacle_activates_again_only_when_rearmed(rearm):
+    avoidance = dataclasses.replace(ONE, rearm=rearm)
+    before, abreast = [(-50.0, 10.0), (-55.0, -15.0)], [(5.0, 10.0), (5.0, -15.0)]
+    state, out = step(before, avoidance=avoidance, t=10.0)
+    assert out.activated[0, 0] and state.case[0, 0] == 2
+    state, out = step(abreast, state, avoidance=avoidance, t=12.0)
+    assert out.restored[0, 0] and state.status[0, 0] == DONE
+    # the formation comes back into range (as after a turn of the route)
+    state, out = step(before, state, avoidance=avoidance, t=14.0)
+    assert out.activated[0, 0] == rearm
+    assert state.status[0, 0] == (ACTIVE if rearm else DONE)
+    assert state.activation_time[0, 0] == (14.0 if rearm else 10.0)
+    assert out.avoiding[0].all() == rearm
+    if rearm:  # the split of the new activation, and its restore as the first one
+        np.testing.assert_array_equal(state.side[0, 0], [1, -1])
+        state, out = step(abreast, state, avoidance=avoidance, t=16.0)
+        assert out.restored[0, 0] and state.restore_time[0, 0] == 16.0

@@ -270,13 +270,17 @@ class AvoidanceConfig:
     # several obstacles may be active at once (docs/deviations.md §3): then only the safety
     # circles must not overlap, and detection circles may; False: one at a time, as the paper
     concurrent: bool = False
+    # a done obstacle activates again when a UAV comes back into its range (a turn of the route
+    # can lead the formation back to it); False: each obstacle once per episode, as the paper
+    rearm: bool = False
 
     def __post_init__(self) -> None:
-        _require(
-            isinstance(self.concurrent, bool),
-            "avoidance.concurrent",
-            f"must be true or false, got {self.concurrent!r}",
-        )
+        for name in ("concurrent", "rearm"):
+            _require(
+                isinstance(getattr(self, name), bool),
+                f"avoidance.{name}",
+                f"must be true or false, got {getattr(self, name)!r}",
+            )
         _positive(self.safety_margin, "avoidance.safety_margin")
         _non_negative(self.split_deadband, "avoidance.split_deadband")
         _positive(self.detection_margin, "avoidance.detection_margin")
@@ -475,8 +479,14 @@ class ObservationConfig:
     neighbours: int = 4  # k, neighbour slots of the local layout [-]
     obstacles: int = 2  # m, obstacle slots of the local layout [-]
     nearest: int = 2  # r, proximity slots of the local layout [-]
+    # other UAVs are sensed within this distance (core.proximity: pair terms linear in N); None:
+    # every other UAV of the copy (all pairs). Must be >= cost.separation_distance and
+    # collision.uav_distance, so that J_i and collisions are the same either way [m]
+    sensing_radius: float | None = None
 
     def __post_init__(self) -> None:
+        if self.sensing_radius is not None:
+            _positive(self.sensing_radius, "observation.sensing_radius")
         _require(
             self.kind in OBSERVATION_KINDS,
             "observation.kind",
@@ -844,6 +854,15 @@ class Scenario:
             f"must be a positive whole number of steps dynamics.dt={self.dynamics.dt}, "
             f"got {self.duration}",
         )
+        sensing = self.observation.sensing_radius
+        if sensing is not None:
+            needed = max(self.cost.separation_distance, self.collision.uav_distance)
+            _require(
+                sensing >= needed,
+                "observation.sensing_radius",
+                f"must be >= cost.separation_distance and collision.uav_distance ({needed:g} m), "
+                f"so that J_i and collisions see every close pair, got {sensing!r}",
+            )
         _check_scene(self)
 
     @property

@@ -24,7 +24,8 @@ Named scenarios of this module (registered in :data:`uav_formation_env.config_io
 - ``swarm_20``, ``swarm_50``, ``swarm_100`` (:func:`swarm_scenario`): concrete scenarios with N
   UAVs in a 10 m grid (a V of 100 would be 1 km wide) and a 4-nearest graph, a start box grown
   to about (3 min_spacing)² per UAV, and the paper's two obstacles on the paper's route with
-  their radii scaled from 30 m by the grid's half-width over the V's 40 m (at least 15 m); the
+  their radii scaled from 30 m by the grid's half-width over the V's 40 m (at least 15 m); other
+  UAVs sensed within 25 m (``observation.sensing_radius``: the pair terms are linear in N); the
   local observation (a full one would hold 712 values per agent at N = 100, and the DMPC
   acting on the local one took 104 ms per step at N = 100 against 276 ms on the full one).
 
@@ -211,7 +212,12 @@ def random_fields_scenario() -> Scenario:
     # the V's half-width: obstacles at most this far to the side still cross the formation
     half_width = max(abs(row[1]) for row in base.formation.offsets)
     field = ObstacleFieldConfig(count=(1, 4), across=(-half_width, half_width))
-    return replace(base, name="random_fields", scene=SceneConfig(obstacles=field))
+    return replace(
+        base,
+        name="random_fields",
+        avoidance=replace(base.avoidance, rearm=True),
+        scene=SceneConfig(obstacles=field),
+    )
 
 
 def random_routes_scenario() -> Scenario:
@@ -225,7 +231,7 @@ def random_routes_scenario() -> Scenario:
     return replace(
         base,
         name="random_routes",
-        avoidance=replace(base.avoidance, concurrent=True),
+        avoidance=replace(base.avoidance, concurrent=True, rearm=True),
         scene=scene,
         # the route is drawn: only the local layout carries the next leg to the policies
         observation=ObservationConfig(kind="local"),
@@ -242,9 +248,17 @@ def random_swarm_scenario() -> Scenario:
         gust_std=(0.0, 0.1),
     )
     # N varies, so only the N-independent observation gives one space for every reset
+    base = Scenario()
     return replace(
-        Scenario(), name="random_swarm", scene=scene, observation=ObservationConfig(kind="local")
+        base,
+        name="random_swarm",
+        avoidance=replace(base.avoidance, rearm=True),
+        scene=scene,
+        observation=ObservationConfig(kind="local"),
     )
+
+
+SWARM_SENSING_RADIUS = 25.0  # [m], observation.sensing_radius of swarm_scenario
 
 
 def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Scenario:
@@ -267,8 +281,9 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
         name=f"swarm_{n_uav}",
         formation=formation,
         initial=start_box_for(base.initial, n_uav),
-        avoidance=replace(base.avoidance, obstacles=obstacles),
-        observation=ObservationConfig(kind="local"),
+        avoidance=replace(base.avoidance, obstacles=obstacles, rearm=True),
+        # pair terms within 25 m (2.5 spacings, about 20 UAVs of the grid): linear in N
+        observation=ObservationConfig(kind="local", sensing_radius=SWARM_SENSING_RADIUS),
     )
 
 

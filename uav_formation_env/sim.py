@@ -39,6 +39,7 @@ from uav_formation_env.core.observer import (
     observer_step_held,
 )
 from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
+from uav_formation_env.core.proximity import SensedPairs, sensed_pairs
 from uav_formation_env.core.reference import CopySchedules, Schedule, copy_schedules
 from uav_formation_env.scenes import max_gust_std, max_obstacles, n_uav_range, scene_of_seed
 from uav_formation_env.seeding import check_seed
@@ -183,7 +184,7 @@ class FormationSim:
         self.topology = topology.init_topology(B, N, self.obstacle_radii.shape[-1])
         self.last: StepResult | None = None  # None until the first reset
         # the states of the last step's result and their pair distances (see pair_distances_of)
-        self._pair_of: tuple[np.ndarray | None, np.ndarray] = (None, np.zeros((B, N, N)))
+        self._pair_of: tuple[np.ndarray | None, np.ndarray | SensedPairs] = (None, np.zeros(0))
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> StepResult:
@@ -337,8 +338,14 @@ class FormationSim:
             if mask is None or mask.all()
             else _where_batch(mask, new_topology, self.topology)
         )
-        # one pairwise-distance matrix for the separation term and the nearest-UAV distance
-        pair = pair_distances(self.z[..., :3])
+        # one set of pair distances for the separation term, the nearest-UAV distance and the
+        # observation: all pairs, or those within the sensing radius (linear in N)
+        radius = cfg.observation.sensing_radius
+        pair = (
+            pair_distances(self.z[..., :3])
+            if radius is None
+            else sensed_pairs(self.z[..., :3], radius)
+        )
         cost = stage_cost(
             self.z,
             u_n,
@@ -450,18 +457,22 @@ class FormationSim:
             )
         return self._shared_field
 
-    def distances(self, pair: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def distances(
+        self, pair: np.ndarray | SensedPairs | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Nearest-UAV distance and nearest obstacle-surface distance, each (B, N) [m].
 
-        The obstacle distance is +inf without obstacles and negative inside an obstacle.
+        The obstacle distance is +inf without obstacles and negative inside an obstacle; the
+        UAV distance is +inf where no other UAV is within ``observation.sensing_radius``.
 
         Args:
             pair: (B, N, N) :func:`~uav_formation_env.core.cost.stage.pair_distances` of the
-                current positions, if already computed.
+                current positions, or their :class:`SensedPairs`, if already computed.
         """
         p = self.z[..., :3]
         if pair is None:
-            pair = pair_distances(p)
+            radius = self.scenario.observation.sensing_radius
+            pair = pair_distances(p) if radius is None else sensed_pairs(p, radius)
         if self.obstacle_radii.shape[-1] == 0:
             surface = np.full(p.shape[:2], np.inf)
         elif self.obstacles is None:
@@ -470,14 +481,20 @@ class FormationSim:
         else:  # padding obstacles are 1e9 m away: never the nearest of a UAV on its route
             centre = topology.obstacle_distances(p, self.obstacles)
             surface = np.minimum.reduce(centre - self.obstacles.radii[:, None], axis=-1)
-        return np.minimum.reduce(pair, axis=-1), surface
+        nearest = pair.nearest() if isinstance(pair, SensedPairs) else np.minimum.reduce(pair, -1)
+        return nearest, surface
 
-    def pair_distances_of(self, result: StepResult) -> np.ndarray:
-        """(B, N, N) UAV-UAV distances of ``result.z`` [m] (+inf on the diagonal): the matrix
-        this step computed for the separation term when ``result`` is the step's own result
-        (one all-pairs pass per step instead of two), else computed now."""
+    def pair_distances_of(self, result: StepResult) -> np.ndarray | SensedPairs:
+        """The UAV-UAV distances of ``result.z``: (B, N, N) [m] (+inf on the diagonal), or the
+        :class:`SensedPairs` within ``observation.sensing_radius``. The ones this step computed
+        for the separation term when ``result`` is the step's own result (one pass per step
+        instead of two), else computed now."""
         z, pair = self._pair_of
-        return pair if z is result.z else pair_distances(result.z[..., :3])
+        if z is result.z:
+            return pair
+        radius = self.scenario.observation.sensing_radius
+        p = result.z[..., :3]
+        return pair_distances(p) if radius is None else sensed_pairs(p, radius)
 
     def reference_preview(self) -> np.ndarray:
         """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held)."""

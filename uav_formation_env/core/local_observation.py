@@ -71,6 +71,7 @@ from uav_formation_env.core.observation import (
     VELOCITY_SCALE,
     observation_dim,
 )
+from uav_formation_env.core.proximity import SensedPairs, pair_distance_between
 
 TIME_SCALE = 50.0  # [s]
 TIME_CLIP = 10.0  # clip of the scaled time to the switch (500 s) [-]
@@ -186,19 +187,108 @@ def _k_smallest_tied(key: np.ndarray, k: int) -> np.ndarray:
     return np.nonzero(chosen)[1].reshape(len(key), k)
 
 
-def _neighbour_keys(distance: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
-    """(B, N, N) uint64 sort keys: in-neighbours by distance, then other UAVs, the UAV itself last.
+def _neighbour_keys(
+    distance: np.ndarray, neighbour: np.ndarray, absent: np.ndarray | None
+) -> np.ndarray:
+    """(B, N, C) uint64 sort keys of each receiver's candidates: in-neighbours by distance, then
+    other UAVs, absent candidates (the UAV itself, padding) last.
 
     The bits of a non-negative float64 order like its value, so ``bits(d_ij)`` (< 2^63: no sign
     bit) with the top bit set for non-neighbours is ``d + large (1 - h_ij)`` without rounding:
     distances never merge, whatever their size. NaN distances count as +inf.
+
+    Args:
+        distance: (B, N, C) candidate distances [m].
+        neighbour: (B, N, C) bool, h_ij != 0 (all True: distance alone).
+        absent: (B, N, C) bool, candidates that are no UAV to pick; None: the diagonal of an
+            all-pairs (C = N) candidate set.
     """
     d = np.where(distance >= 0.0, distance, np.inf)
     bits = d.view(np.uint64)
-    key = np.where(adjacency != 0, bits, bits | _TOP)
-    batch, n_uav = distance.shape[:2]
-    key.reshape(batch, n_uav * n_uav)[:, :: n_uav + 1] = _SELF  # above every other key
+    key = np.where(neighbour, bits, bits | _TOP)
+    if absent is None:
+        batch, n_uav = distance.shape[:2]
+        key.reshape(batch, n_uav * n_uav)[:, :: n_uav + 1] = _SELF  # above every other key
+    else:
+        key[absent] = _SELF
     return key
+
+
+@dataclass(frozen=True)
+class _Candidates:
+    """The UAVs each receiver may put in a slot, sorted by UAV index (the tie rule).
+
+    Attributes:
+        uav: (B, N, C) int64 UAV j of each candidate column.
+        distance: (B, N, C) ||p_i - p_j|| [m].
+        neighbour: (B, N, C) bool, h_ij != 0.
+        absent: (B, N, C) bool, padding columns; None: all pairs (C = N, the receiver itself on
+            the diagonal).
+    """
+
+    uav: np.ndarray
+    distance: np.ndarray
+    neighbour: np.ndarray
+    absent: np.ndarray | None
+
+
+def _candidates(
+    distance: np.ndarray | SensedPairs, adjacency: np.ndarray, positions: np.ndarray
+) -> _Candidates:
+    """All other UAVs (a distance matrix), or the in-neighbours and the sensed UAVs (pairs within
+    the sensing radius): the only UAVs a slot can hold, O(N) per receiver or O(1)."""
+    batch, n_uav = adjacency.shape[:2]
+    if not isinstance(distance, SensedPairs):
+        uav = np.broadcast_to(np.arange(n_uav), (batch, n_uav, n_uav))
+        return _Candidates(uav, distance, adjacency != 0, None)
+    # in-neighbours (communication) and sensed UAVs (within R), each pair once, sorted by
+    # receiver then sender
+    b, i, j = np.nonzero(adjacency)
+    codes = np.concatenate(
+        (distance.receiver * n_uav + distance.sender, (b * n_uav + i) * n_uav + j)
+    )
+    # two sorted runs: a stable (radix / merge) sort and a dedupe beat np.unique 10x
+    codes.sort(kind="stable")
+    codes = codes[np.diff(codes, prepend=-1) != 0]
+    receiver, sender = codes // n_uav, codes % n_uav
+    flat = positions.reshape(-1, 3)
+    pair_distance = pair_distance_between(flat, receiver, receiver - receiver % n_uav + sender)
+    counts = np.bincount(receiver, minlength=batch * n_uav)
+    width = max(int(counts.max(initial=0)), 1)
+    column = np.arange(len(receiver)) - (np.cumsum(counts) - counts)[receiver]
+    uav = np.full((batch * n_uav, width), -1, dtype=np.int64)
+    uav[receiver, column] = sender
+    dist = np.full((batch * n_uav, width), np.inf)
+    dist[receiver, column] = pair_distance
+    neighbour = np.zeros((batch * n_uav, width), dtype=bool)
+    neighbour[receiver, column] = np.ravel(adjacency)[codes] != 0
+    shape = (batch, n_uav, width)
+    return _Candidates(
+        uav.reshape(shape), dist.reshape(shape), neighbour.reshape(shape), uav.reshape(shape) < 0
+    )
+
+
+def _select_slots(candidates: _Candidates, k: int, nearest: int) -> np.ndarray:
+    """(B, N, k + nearest) UAV in each slot, -1 where absent: the k smallest neighbour keys (in-
+    neighbours by distance, then the nearest others), then the ``nearest`` closest candidates
+    not already taken (proximity slots)."""
+    uav, absent = candidates.uav, candidates.absent
+    batch, n_uav, width = uav.shape
+    index = np.full((batch, n_uav, k + nearest), -1, dtype=np.int64)
+    key = _neighbour_keys(candidates.distance, candidates.neighbour, absent)
+    column = _k_smallest(key, k)  # (B, N, min(k, C)); absent columns only after every UAV
+    taken = _take_rows(uav, column)
+    index[..., : column.shape[-1]] = np.where(_take_rows(key, column) == _SELF, -1, taken)
+    if nearest:
+        # the nearest candidates not in a neighbour slot, by distance alone: the ones a
+        # collision can come from, whatever the graph (absent and taken ones sort last)
+        near_key = _neighbour_keys(candidates.distance, np.ones(uav.shape, dtype=bool), absent)
+        rows = np.arange(batch * n_uav).reshape(batch, n_uav, 1) * width
+        near_key.reshape(-1)[(rows + column).ravel()] = _SELF
+        extra = _k_smallest(near_key, nearest)  # (B, N, min(r, C))
+        found = np.where(_take_rows(near_key, extra) == _SELF, -1, _take_rows(uav, extra))
+        index[..., k : k + extra.shape[-1]] = found
+    return index
 
 
 @dataclass(frozen=True)
@@ -233,7 +323,7 @@ def build_local_observations(
     next_velocity: np.ndarray | None = None,
     time_to_switch: np.ndarray | None = None,
     nearest: int = 2,
-    distance: np.ndarray | None = None,
+    distance: np.ndarray | SensedPairs | None = None,
 ) -> LocalObservations:
     """Every agent's local observation (length independent of N).
 
@@ -258,7 +348,9 @@ def build_local_observations(
         nearest: proximity slots after the k neighbour slots, >= 0: the nearest UAVs not in a
             neighbour slot.
         distance: (B, N, N) :func:`~uav_formation_env.core.cost.stage.pair_distances` of ``z``,
-            if the caller has them; computed here otherwise.
+            if the caller has them, or the :class:`~uav_formation_env.core.proximity.
+            SensedPairs` within a sensing radius (then the slots hold in-neighbours and sensed
+            UAVs only); None: all pairs, computed here.
 
     Returns:
         :class:`LocalObservations` with obs (B, N, dim) and neighbour_index (B, N, k + nearest).
@@ -285,19 +377,7 @@ def build_local_observations(
     # neighbour slots, then proximity slots
     if distance is None:
         distance = pair_distances(z[..., :3])
-    key = _neighbour_keys(distance, adjacency)
-    index = _k_smallest(key, k)  # (B, N, min(k, N)); the UAV itself only in column N - 1
-    neighbour_index = np.full((batch, n_uav, slots_count), -1, dtype=np.int64)
-    filled = min(k, n_uav - 1)
-    neighbour_index[..., :filled] = index[..., :filled]
-    if nearest and n_uav - 1 > filled:
-        # the nearest UAVs not in a neighbour slot, by distance alone: the ones a collision
-        # can come from, whatever the graph (the UAV itself and the taken ones sort last)
-        near_key = _neighbour_keys(distance, np.ones_like(adjacency))
-        rows = np.arange(batch * n_uav).reshape(batch, n_uav, 1) * n_uav
-        near_key.reshape(-1)[(rows + index[..., :filled]).ravel()] = _SELF
-        extra = min(nearest, n_uav - 1 - filled)
-        neighbour_index[..., k : k + extra] = _k_smallest(near_key, extra)
+    neighbour_index = _select_slots(_candidates(distance, adjacency, z[..., :3]), k, nearest)
     present = neighbour_index >= 0
     safe = np.where(present, neighbour_index, 0)
     flat = safe + (np.arange(batch) * n_uav)[:, None, None]  # into the (B·N) flattening

@@ -9,7 +9,9 @@ paper). ê is the horizontal direction of the preset velocity at the current tim
 +90°, λ_lon = (p - o)·ê, λ_lat = (p - o)·n̂, D = ||p_xy - o||; "in range" is |λ_lat| < R_s and
 λ_lon < 0.
 
-Per copy, each obstacle goes idle (0) -> active (1) -> done (2), once. One :func:`update_topology`
+Per copy, each obstacle goes idle (0) -> active (1) -> done (2), once (with ``avoidance.rearm``
+a done obstacle activates again, like an idle one, when the rule of phase 1 holds again: after a
+turn of the route the formation can come back into its range). One :func:`update_topology`
 call runs three phases in this order:
 
 1. **Activation.** An idle obstacle is a candidate when at least one UAV is in range and
@@ -266,7 +268,8 @@ def update_topology(
         # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
         # detection radius, so nothing can activate (activation needs min_i D_i < d^o).
         rel = positions[:, :, None, :2] - fast_centres
-        near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect_sq) & (state.status == IDLE)
+        armed = (state.status == IDLE) | (avoidance.rearm & (state.status == DONE))
+        near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect_sq) & armed
         if not near_idle.any():
             return _copy_state(state), _idle_output(preset, h0, batch, n_uav, n_obs)
     e_hat, _ = heading_frame(preset)
@@ -284,7 +287,8 @@ def update_topology(
     # 1. activation: every candidate when concurrent; else at most one active obstacle per copy,
     # the nearest candidate wins
     min_dist = dist.min(axis=1)  # (O, B)
-    candidate = (status == IDLE) & near.any(axis=1) & (min_dist < r_detect_b) & present
+    armed = (status == IDLE) | (avoidance.rearm & (status == DONE))  # (O, B)
+    candidate = armed & near.any(axis=1) & (min_dist < r_detect_b) & present
     if avoidance.concurrent:
         activated = candidate
     else:

@@ -8,6 +8,7 @@ from functools import lru_cache
 import numpy as np
 
 from uav_formation_env.config import CostConfig
+from uav_formation_env.core.proximity import SensedPairs, gap_sq
 
 
 @dataclass(frozen=True)
@@ -250,8 +251,7 @@ def separation_sq(
 
 def _gap_sq_sum(pair: np.ndarray, weight: np.ndarray, distance: float, axis: int) -> np.ndarray:
     """``Σ_axis weight max(0, d_s - pair)²`` of pair distances [m] (shapes broadcast) [m²]."""
-    gap = np.maximum(distance - pair, 0.0)
-    return (gap * gap * weight).sum(axis=axis)
+    return (gap_sq(pair, distance) * weight).sum(axis=axis)
 
 
 def pair_distances(positions: np.ndarray) -> np.ndarray:
@@ -279,7 +279,7 @@ def stage_cost(
     offsets: np.ndarray,
     weights: CostConfig,
     mirrored: bool = False,
-    pair_distance: np.ndarray | None = None,
+    pair_distance: np.ndarray | SensedPairs | None = None,
 ) -> CostTerms:
     """One summand of J_i on realised states (the env reward is minus its total).
 
@@ -292,7 +292,9 @@ def stage_cost(
         weights: q, r, n, s, d_s (the terminal weight m does not enter a stage).
         mirrored: literal mirrored-offset reading.
         pair_distance: (B, N, N) :func:`pair_distances` of ``z``'s positions [m], if the caller
-            has them already; computed here otherwise (only when the separation term is on).
+            has them already, or the :class:`~uav_formation_env.core.proximity.SensedPairs`
+            within a sensing radius >= d_s (the same term, linear in N); computed here otherwise
+            (only when the separation term is on).
 
     Returns:
         :class:`CostTerms` of shape (B, N) with ``terminal = 0``; ``separation`` runs over every
@@ -306,7 +308,9 @@ def stage_cost(
         pair_distance = pair_distances(z[..., :3])
     # The penalty is exactly +0 while every pair is at least d_s apart (the usual case); NaN
     # distances fail the test and take the general path.
-    if active and not pair_distance.min() >= distance:
+    if active and isinstance(pair_distance, SensedPairs):
+        separation = weights.separation * pair_distance.gap_sq_sum(distance)
+    elif active and not pair_distance.min() >= distance:
         # the diagonal is +inf here (0 in separation_sq): either way its term is exactly +0
         gap_sq = _gap_sq_sum(pair_distance, _not_eye(z.shape[1]), distance, axis=2)
         separation = weights.separation * gap_sq
