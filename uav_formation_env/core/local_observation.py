@@ -43,6 +43,12 @@ neighbour slot, by distance alone (their flag says whether they are in-neighbour
 with k or more in-neighbours would otherwise not see a non-neighbour that comes close, and the
 separation term and collision avoidance need it.
 
+With ``observation.sensing_radius`` = R the UAVs a slot can hold are UAV i's in-neighbours (whom
+it hears, wherever they are) and the UAVs within R (whom it senses), found without the N x N
+distance matrix (:mod:`~uav_formation_env.core.proximity`): the rules above applied to exactly those
+UAVs, so the fill and proximity slots stay empty when nobody else is within R, and slot 14 is then
+the clip value. The selection is the same code for both candidate sets (``_select_slots``).
+
 Defaults: k = 4 because the paper's graph (``config.PAPER_ADJACENCY``) has in-degree at most 4, so
 at N = 5 every other UAV has a slot and nothing of the paper's J_i is lost; the k-nearest formation
 graphs (``formations.k_nearest_adjacency``) also use k = 4 (symmetrising can add in-neighbours, of
