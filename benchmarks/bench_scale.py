@@ -1,19 +1,20 @@
 """How the project scales with N (prints figures, asserts nothing).
 
 For each N (default 5, 10, 20, 50, 100: a 10 m grid with a 4-nearest graph on the paper's route
-and obstacles, :func:`~uav_formation_env.scenarios.swarm_scenario`; N = 5 is the same grid
-family, not the paper's V, so that every row is one family):
+and obstacles, :func:`~uav_formation_env.scenarios.swarm_scenario`, local observation, UAVs
+sensed within 25 m; N = 5 is the same grid family, not the paper's V, so that every row is one
+family):
 
 * episode-layer env-steps/s at B = 1 and B = 256 with random actions (one step of all N agents,
-  observations included);
+  observations included), and UAV-steps/s (env-steps/s x N) at B = 256: flat when the step's
+  cost grows linearly in N;
 * the reference DMPC (LFPIO) ms per control step at B = 1, and per UAV-step;
 * every figure as a ratio to N = 5 measured in the same run.
 
     python benchmarks/bench_scale.py [--sizes 5 10 20 50 100] [--seconds 2] [--dmpc-steps 5]
 
-The issue's target is a DMPC cost per UAV-step at N = 100 within 10x of N = 5; each UAV's
-problem still includes every other UAV's zero-input rollout in its separation term (O(N) per
-UAV), which is what this benchmark shows growing.
+The issue's targets: a DMPC cost per UAV-step at N = 100 within 10x of N = 5, and an env step
+whose cost grows at most linearly in N.
 """
 
 from __future__ import annotations
@@ -47,11 +48,11 @@ def dmpc_ms(scenario, steps: int) -> float:
     episodes = FormationEpisodes(scenario, 1)
     policy = make_policy("lfpio", scenario)
     policy.reset(1, seeds=[0])
-    obs = episodes.reset(seed=0).observation
-    obs = episodes.step(policy.act_batch(obs)).observation
+    step = episodes.reset(seed=0)
+    step = episodes.step(policy.act_batch(step.observation, step.neighbour_index))
     start = time.perf_counter()
     for _ in range(steps):
-        obs = episodes.step(policy.act_batch(obs)).observation
+        step = episodes.step(policy.act_batch(step.observation, step.neighbour_index))
     return 1e3 * (time.perf_counter() - start) / steps
 
 
@@ -76,13 +77,16 @@ def main() -> None:
     base = rows[0]
     print(
         f"\n| N | env-steps/s B=1 | (vs N={base[0]}) | env-steps/s B=256 | (vs N={base[0]}) "
+        f"| UAV-steps/s B=256 | (vs N={base[0]}) "
         f"| DMPC ms/step | per UAV-step ms | (vs N={base[0]}) |"
     )
-    print("|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for n, one, many, ms in rows:
         per_uav, base_per_uav = ms / n, base[3] / base[0]
+        uav_rate, base_uav_rate = many * n, base[2] * base[0]
         print(
             f"| {n} | {one:,.0f} | {one / base[1]:.2f}x | {many:,.0f} | {many / base[2]:.2f}x "
+            f"| {uav_rate:,.0f} | {uav_rate / base_uav_rate:.2f}x "
             f"| {ms:.1f} | {per_uav:.2f} | {per_uav / base_per_uav:.1f}x |"
         )
 
