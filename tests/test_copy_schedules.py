@@ -75,7 +75,7 @@ def test_each_copy_flies_its_own_drawn_route_and_a_seed_names_it():
             s.step(consensus_pd(s.z, last.reference_velocity, last.adjacency, s.offsets, 5.0))
         free = ~sim.last.avoiding  # (B, N): UAVs on the preset velocity
         for b in range(3):
-            own = preset_velocity(sim.scenes[b].schedule, sim.t[b])
+            own = preset_velocity(sim.scenes[b].schedule, sim.t[b]) + sim.last.route_correction[b]
             mine = sim.last.reference_velocity[b][free[b]]
             np.testing.assert_array_equal(mine, np.broadcast_to(own, mine.shape))
     np.testing.assert_array_equal(alone.z[0], sim.z[1])
@@ -84,10 +84,12 @@ def test_each_copy_flies_its_own_drawn_route_and_a_seed_names_it():
     assert len(headings) == 2
 
 
-def test_the_policy_preview_from_the_local_observation_is_the_simulator_preview():
-    episodes = FormationEpisodes(ROUTES, 4)
+@pytest.mark.parametrize("route_gain", [0.0, 0.1])
+def test_the_policy_preview_from_the_local_observation_is_the_simulator_preview(route_gain):
+    scenario = with_overrides(ROUTES, {"avoidance.route_gain": route_gain})
+    episodes = FormationEpisodes(scenario, 4)
     step = episodes.reset(seed=[1, 2, 3, 4])
-    sim, config, switches = episodes.sim, ROUTES.observation, 0
+    sim, config, switches, corrected = episodes.sim, ROUTES.observation, 0, 0
     for _ in range(250):  # 50 s: every copy passes at least one turn
         decoded = decode_local_observations(
             step.observation, config.neighbours, config.obstacles, config.nearest
@@ -103,11 +105,13 @@ def test_the_policy_preview_from_the_local_observation_is_the_simulator_preview(
         ).reshape(4, 5, -1, 3)
         theirs = sim.reference_preview()
         np.testing.assert_allclose(ours, theirs, atol=1e-5)  # float32 slots
+        corrected += int((np.abs(step.result.route_correction) > 0.1).any())
         switches += int((np.abs(np.diff(theirs, axis=2)).max(axis=-1) > 1).sum())
         last = step.result
         u = consensus_pd(sim.z, last.reference_velocity, last.adjacency, sim.offsets, 5.0)
         step = episodes.step(u)
     assert switches > 0  # the previews did cross turns
+    assert (corrected > 0) == (route_gain > 0)  # and held a route-return term
 
 
 def test_mission_route_error_is_measured_against_each_copys_own_route():
@@ -148,3 +152,33 @@ def test_drawn_routes_need_the_local_layout_and_pass_every_checker():
         parallel_api_test(parallel_env(scenario=ROUTES), num_cycles=50)
         parallel_seed_test(lambda: parallel_env(scenario=ROUTES), num_cycles=50)
         gym_check_env(gymnasium.make(GYM_ID, scenario=ROUTES).unwrapped)
+
+
+@pytest.mark.parametrize("kind", ["full", "local"])
+def test_the_dmpc_previews_the_route_return_term_on_either_layout(kind):
+    from uav_formation_env.core.observation import decode_observations
+    from uav_formation_env.policies.broadcast import horizon_problems
+
+    fields = with_overrides(
+        resolve_scenario("random_fields"), {"duration": 60.0, "observation.kind": kind}
+    )
+    assert fields.avoidance.route_gain > 0
+    episodes = FormationEpisodes(fields, 3)
+    step = episodes.reset(seed=[0, 1, 2])
+    sim, config, corrected = episodes.sim, fields.observation, 0
+    plans = np.zeros((3, 5, fields.cost.horizon, 3))
+    for _ in range(300):
+        if kind == "full":
+            decoded = decode_observations(step.observation, 5)
+        else:
+            decoded = decode_local_observations(
+                step.observation, config.neighbours, config.obstacles, config.nearest
+            )
+            decoded = type(decoded)(**{**decoded.__dict__, "neighbour_index": step.neighbour_index})
+        preview = horizon_problems(decoded, plans, fields).cost.reference_preview
+        np.testing.assert_allclose(preview, sim.reference_preview(), atol=1e-5)
+        corrected += int((np.abs(step.result.route_correction) > 0.1).any())
+        last = step.result
+        u = consensus_pd(sim.z, last.reference_velocity, last.adjacency, sim.offsets, 5.0)
+        step = episodes.step(u)
+    assert corrected > 0

@@ -634,3 +634,41 @@ def test_a_done_obstacle_activates_again_only_when_rearmed(rearm):
         np.testing.assert_array_equal(state.side[0, 0], [1, -1])
         state, out = step(abreast, state, avoidance=avoidance, t=16.0)
         assert out.restored[0, 0] and state.restore_time[0, 0] == 16.0
+
+
+# --- route return (avoidance.route_gain) --------------------------------------------------------
+
+
+def test_route_correction_leads_back_to_the_preset_route():
+    from uav_formation_env.core.topology import route_correction
+
+    gain = dataclasses.replace(ONE, route_gain=0.1, route_correction_max=5.0)
+    start = np.zeros((3, 3))
+    t = np.array([10.0, 10.0, 10.0])  # the route point is (200, 0, 0)
+    # centroids 30 m left of it, 30 m behind it and above it, 200 m right of it
+    centroid = np.array([[200.0, 30.0, 0.0], [170.0, 0.0, 50.0], [200.0, -200.0, 0.0]])
+    positions = centroid[:, None, :] + np.array([[5.0, 0, 0], [-5.0, 0, 0]])  # (3, 2, 3)
+    c = route_correction(gain, SCHEDULE, t, positions, start)
+    np.testing.assert_allclose(c, [[0.0, -3.0, 0.0], [3.0, 0.0, 0.0], [0.0, 5.0, 0.0]])
+    assert route_correction(ONE, SCHEDULE, t, positions, start) is None  # the paper: off
+    with pytest.raises(ValueError, match="route_start"):
+        route_correction(gain, SCHEDULE, t, positions, None)
+    # in the outputs: far from the obstacle every UAV gets preset + c
+    state, t10, start = init_topology(1, 3, 1), np.array([10.0]), np.array([[-300.0, 0.0, 0.0]])
+    far = np.array([[[-700.0, 10.0, 0.0], [-710.0, 30.0, 0.0], [-710.0, -10.0, 0.0]]])
+    _, out = update_topology(state, far, far * 0, t10, gain, SCHEDULE, ring(3), route_start=start)
+    expected = route_correction(gain, SCHEDULE, t10, far, start)
+    assert np.abs(expected).max() > 1.0
+    np.testing.assert_allclose(out.route_correction, expected)
+    np.testing.assert_allclose(
+        out.reference_velocity[0], np.broadcast_to(PRESET + expected, (3, 3))
+    )
+    # while an avoidance runs none: the group that is not guided (UAV 2, side -, no member in
+    # range) keeps the preset velocity, not pulled back towards the obstacle's line
+    xy = [(-50.0, 10.0), (-60.0, 30.0), (-60.0, -100.0)]
+    near = np.concatenate([np.asarray(xy)[None], np.zeros((1, 3, 1))], axis=-1)
+    _, out = update_topology(state, near, near * 0, t10, gain, SCHEDULE, ring(3), route_start=start)
+    assert out.avoiding[0].tolist() == [True, True, False]
+    np.testing.assert_array_equal(out.route_correction, 0.0)
+    np.testing.assert_allclose(out.reference_velocity[0, 2], PRESET)
+    assert np.linalg.norm(out.reference_velocity[0, 0]) == pytest.approx(20.0)  # the tangent

@@ -273,8 +273,15 @@ class AvoidanceConfig:
     # a done obstacle activates again when a UAV comes back into its range (a turn of the route
     # can lead the formation back to it); False: each obstacle once per episode, as the paper
     rearm: bool = False
+    # route return: outside an avoidance the reference is the preset velocity plus
+    # route_gain x (preset route point - formation centroid), horizontal, at most
+    # route_correction_max; 0 is the paper (the preset velocity alone) [1/s], [m/s]
+    route_gain: float = 0.0
+    route_correction_max: float = 5.0
 
     def __post_init__(self) -> None:
+        _non_negative(self.route_gain, "avoidance.route_gain")
+        _non_negative(self.route_correction_max, "avoidance.route_correction_max")
         for name in ("concurrent", "rearm"):
             _require(
                 isinstance(getattr(self, name), bool),

@@ -167,7 +167,8 @@ def encode_observations(
             m=config.obstacles,
             nearest=config.nearest,
             mirrored=scenario.formation.mirrored_offsets,
-            next_velocity=next_velocity,
+            # the next leg's reference as it would be now (with the route-return term)
+            next_velocity=next_velocity + result.route_correction,
             time_to_switch=wait,
             distance=sim.pair_distances_of(result),
         )
@@ -275,7 +276,6 @@ class FormationEpisodes:
         self.u_max = scenario.dynamics.u_max
         self.autoreset = bool(autoreset)
         self.fly_on_after_collision = bool(fly_on_after_collision)
-        self.route_start = np.zeros((self.batch_size, 3))  # centroid at t = 0 [m]
         self.last: EpisodeStep | None = None
         self._flight: FormationSim | None = None  # flies copies to their start step
         self._staggered = False
@@ -294,7 +294,6 @@ class FormationEpisodes:
         :meth:`FormationSim.reset` for ``seed``)."""
         result = self.sim.reset(seed=seed, mask=mask)
         reset = np.ones(self.batch_size, dtype=bool) if mask is None else np.asarray(mask)
-        self.route_start[reset] = result.z[reset, :, :3].mean(axis=1)
         starts = self._start_steps(reset)
         if starts.any():
             result = self._fly_to(starts)
@@ -447,7 +446,7 @@ class FormationEpisodes:
 
     def _left_corridor(self, result: StepResult) -> np.ndarray:
         centroid = result.z[..., :3].mean(axis=1)
-        off = route_error(self.sim.schedule, result.t, centroid, self.route_start)
+        off = route_error(self.sim.schedule, result.t, centroid, self.sim.route_start)
         return off > self.scenario.episode.corridor_width
 
     def _diverged(self, result: StepResult) -> np.ndarray:

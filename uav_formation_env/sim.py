@@ -72,6 +72,7 @@ class StepResult:
     collision: np.ndarray  # (B, N) too close to a UAV or inside an obstacle
     activated: np.ndarray  # (B, O) obstacle became active at this step
     restored: np.ndarray  # (B, O) obstacle finished at this step
+    route_correction: np.ndarray  # (B, 3) route-return term of the references [m/s]
 
 
 def _seeds_for(seed: SeedLike, count: int) -> list[int | None]:
@@ -179,6 +180,7 @@ class FormationSim:
         self.noise_pos = np.zeros(B, dtype=np.int64)  # next unused noise step per copy
         self._noise_left = NOISE_BLOCK  # steps until some copy needs a new noise block
         self.t = np.zeros(B)  # time since reset [s]
+        self.route_start = np.zeros((B, 3))  # formation centroid at t = 0: the route's start [m]
         self.steps = np.zeros(B, dtype=np.int64)  # control steps since reset
         self.observer: ObserverState = observer_init(self.z[..., 3:])
         self.topology = topology.init_topology(B, N, self.obstacle_radii.shape[-1])
@@ -239,6 +241,7 @@ class FormationSim:
                 self._set_scene(b, scene)
             self.gust[b] = self.disturbance.initial_gust(rng, scene.disturbance.gust_std)
             self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)
+        self.route_start[mask] = self.z[mask, :, :3].mean(axis=1)
         self.noise_pos[mask] = 0
         self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
         self.t[mask] = 0.0
@@ -332,6 +335,7 @@ class FormationSim:
             self.schedule,
             self.base_adjacency,
             self.obstacles,
+            self.route_start,
         )
         self.topology = (
             new_topology
@@ -385,6 +389,7 @@ class FormationSim:
             collision=collision,
             activated=out.activated,
             restored=out.restored,
+            route_correction=out.route_correction,
         )
 
     # ------------------------------------------------------------------ copies
@@ -410,7 +415,7 @@ class FormationSim:
                 "adopt() needs a source that has been reset, and a reset target unless every "
                 "copy is adopted"
             )
-        for name in ("z", "gust", "noise", "noise_pos", "t", "steps"):
+        for name in ("z", "gust", "noise", "noise_pos", "t", "steps", "route_start"):
             getattr(self, name)[mask] = getattr(source, name)[mask]
         if self.scenario.scene is not None:
             assert self.obstacles is not None and source.obstacles is not None
@@ -506,6 +511,7 @@ class FormationSim:
             self.scenario.cost.horizon,
             self.last.reference_velocity,
             self.last.avoiding,
+            self.last.route_correction,
         )
 
     @property

@@ -250,6 +250,7 @@ def reference_preview(
     horizon: int,
     reference_now: np.ndarray,
     avoiding: np.ndarray,
+    correction: np.ndarray | None = None,
 ) -> np.ndarray:
     """Desired velocity v^d(t + kδ) over the prediction horizon (docs/model.md §4.3).
 
@@ -260,15 +261,19 @@ def reference_preview(
         horizon: H, number of steps; k = 0..H.
         reference_now: (B, N, 3) current reference (``TopologyOutput.reference_velocity``) [m/s].
         avoiding: (B, N) bool, UAVs that hold ``reference_now`` for every k.
+        correction: (B, 3) route-return term of this step, held over the horizon and added to
+            the schedule (``TopologyOutput.route_correction``) [m/s]; None: none.
 
     Returns:
-        (B, N, H+1, 3) [m/s]: the schedule at t + k·dt, except avoiding UAVs, which hold
-        ``reference_now``.
+        (B, N, H+1, 3) [m/s]: the schedule at t + k·dt (plus the correction), except avoiding
+        UAVs, which hold ``reference_now``.
     """
     reference_now = np.asarray(reference_now, dtype=float)
     batch = reference_now.shape[0]
     t = np.broadcast_to(np.asarray(t, dtype=float), (batch,))
     times = t[:, None] + dt * np.arange(horizon + 1)  # (B, H+1)
     schedule_part = preset_velocity(schedule, times)[:, None]  # (B, 1, H+1, 3)
+    if correction is not None:
+        schedule_part = schedule_part + correction[:, None, None, :]
     hold = np.asarray(avoiding, dtype=bool)[:, :, None, None]
     return np.where(hold, reference_now[:, :, None, :], schedule_part)

@@ -80,7 +80,12 @@ from uav_formation_env.core.obstacles import (
     relative_geometry,
     tangent_direction,
 )
-from uav_formation_env.core.reference import Schedule, preset_velocity, reference_preview
+from uav_formation_env.core.reference import (
+    Schedule,
+    preset_displacement,
+    preset_velocity,
+    reference_preview,
+)
 
 __all__ = [
     "ACTIVE",
@@ -93,6 +98,7 @@ __all__ = [
     "preset_velocity",
     "reference_preview",
     "reset_topology",
+    "route_correction",
     "update_topology",
 ]
 
@@ -136,6 +142,8 @@ class TopologyOutput:
         activated: (B, O) bool, obstacle became active at this update.
         restored: (B, O) bool, obstacle finished (H <- H0) at this update.
         active_obstacle: (B,) int64, index of the active obstacle, -1 if none.
+        route_correction: (B, 3) route-return term in the references of the UAVs that are not
+            avoiding (:func:`route_correction`; zeros when off) [m/s].
     """
 
     adjacency: np.ndarray
@@ -145,6 +153,7 @@ class TopologyOutput:
     activated: np.ndarray
     restored: np.ndarray
     active_obstacle: np.ndarray
+    route_correction: np.ndarray
 
 
 def init_topology(batch: int, n_uav: int, n_obstacles: int) -> TopologyState:
@@ -215,6 +224,7 @@ def update_topology(
     schedule: Schedule,
     base_adjacency: np.ndarray,
     obstacles: ObstacleField | None = None,
+    route_start: np.ndarray | None = None,
 ) -> tuple[TopologyState, TopologyOutput]:
     """One topology update (activation, guides and ends, outputs; see the module docstring).
 
@@ -232,6 +242,8 @@ def update_topology(
         base_adjacency: (N, N) H0 shared by every copy, or (B, N, N) per copy; row = receiver.
         obstacles: per-copy obstacles (scene distributions); None: ``avoidance.obstacles`` in
             every copy. The margins and rules always come from ``avoidance``.
+        route_start: (B, 3) formation centroid at t = 0 [m], where the preset route starts;
+            needed by ``avoidance.route_gain`` > 0 (:func:`route_correction`).
 
     Returns:
         The new state and this step's outputs.
@@ -253,8 +265,10 @@ def update_topology(
         t = np.broadcast_to(t, (batch,))
     h0 = np.asarray(base_adjacency, dtype=float)
     preset = preset_velocity(schedule, t)  # (B, 3)
+    correction = route_correction(avoidance, schedule, t, positions, route_start)  # (B, 3)
+    base = preset if correction is None else preset + correction  # outside an avoidance
     if n_obs == 0:
-        return state, _idle_output(preset, h0, batch, n_uav, n_obs)
+        return state, _idle_output(base, h0, batch, n_uav, n_obs, correction)
 
     if obstacles is None:  # one field for every copy: (O,) radii broadcast as (O, 1, 1)
         centres, r_safe, r_detect = obstacle_arrays(avoidance)
@@ -271,7 +285,7 @@ def update_topology(
         armed = (state.status == IDLE) | (avoidance.rearm & (state.status == DONE))
         near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect_sq) & armed
         if not near_idle.any():
-            return _copy_state(state), _idle_output(preset, h0, batch, n_uav, n_obs)
+            return _copy_state(state), _idle_output(base, h0, batch, n_uav, n_obs, correction)
     e_hat, _ = heading_frame(preset)
     rel_x, rel_y, dist, lon, lat = relative_geometry(positions, centres, e_hat)  # (O, N, B)
     near = in_range(lon, lat, r_safe_b)
@@ -330,7 +344,12 @@ def update_topology(
         activation_time=activation_time.T,
         restore_time=restore_time.T,
     )
-    output = _idle_output(preset, h0, batch, n_uav, n_obs)
+    if correction is not None:
+        # no route return while an avoidance runs in the copy: the UAVs that are not guided
+        # (a group that has passed) would be pulled back towards the obstacle's line
+        correction = np.where((status == ACTIVE).any(axis=0)[:, None], 0.0, correction)
+        base = preset + correction
+    output = _idle_output(base, h0, batch, n_uav, n_obs, correction)
     output.activated = np.ascontiguousarray(activated.T)
     output.restored = np.ascontiguousarray(restored.T)
     active = status == ACTIVE
@@ -342,23 +361,68 @@ def update_topology(
     return new_state, output
 
 
+def route_correction(
+    avoidance: AvoidanceConfig,
+    schedule: Schedule,
+    t: np.ndarray,
+    positions: np.ndarray,
+    route_start: np.ndarray | None,
+) -> np.ndarray | None:
+    """The route-return term of the reference outside an avoidance, or None when off.
+
+    ``c = route_gain (r(t) - centroid)`` in the horizontal plane, scaled down to at most
+    ``route_correction_max`` (and 0 while an obstacle is active in the copy, see
+    :func:`update_topology`), with r(t) = ``route_start`` + the preset displacement (the point
+    where the formation would be had it flown the schedule exactly; the mission's route error is
+    ||r(t) - centroid||). It leads the formation back to its route after an avoidance, which the
+    paper's velocity-tracking J_i alone never does.
+
+    Args:
+        avoidance: ``route_gain`` [1/s] and ``route_correction_max`` [m/s].
+        schedule: preset velocity, shared or per copy.
+        t: (B,) time [s].
+        positions: (B, N, 3) [m].
+        route_start: (B, 3) centroid at t = 0 [m].
+
+    Returns:
+        (B, 3) [m/s] with a zero z component, or None if ``route_gain`` is 0.
+    """
+    if avoidance.route_gain == 0.0:
+        return None
+    if route_start is None:
+        raise ValueError("avoidance.route_gain > 0 needs route_start, the centroid at t = 0")
+    offset = route_start + preset_displacement(schedule, t) - positions.mean(axis=1)
+    correction = np.zeros_like(offset)
+    correction[:, :2] = avoidance.route_gain * offset[:, :2]
+    size = np.sqrt((correction**2).sum(axis=1, keepdims=True))
+    limit = avoidance.route_correction_max
+    return correction * np.minimum(1.0, limit / np.maximum(size, 1e-12))
+
+
 def _idle_output(
-    preset: np.ndarray, h0: np.ndarray, batch: int, n_uav: int, n_obs: int
+    reference: np.ndarray,
+    h0: np.ndarray,
+    batch: int,
+    n_uav: int,
+    n_obs: int,
+    correction: np.ndarray | None = None,
 ) -> TopologyOutput:
-    """Outputs with no active obstacle: H0, one group, schedule references."""
+    """Outputs with no active obstacle: H0, one group, the schedule's (B, 3) ``reference``
+    (preset velocity plus the route correction) for every UAV."""
     # fresh arrays filled by assignment (np.broadcast_to(...).copy(), np.full: slower at small B)
-    adjacency, reference = np.empty((batch, n_uav, n_uav)), np.empty((batch, n_uav, 3))
-    adjacency[...], reference[...] = h0, preset[:, None, :]
+    adjacency, reference_velocity = np.empty((batch, n_uav, n_uav)), np.empty((batch, n_uav, 3))
+    adjacency[...], reference_velocity[...] = h0, reference[:, None, :]
     active_obstacle = np.empty(batch, dtype=np.int64)
     active_obstacle.fill(-1)
     return TopologyOutput(
         adjacency=adjacency,
         groups=np.zeros((batch, n_uav), dtype=np.int64),
-        reference_velocity=reference,
+        reference_velocity=reference_velocity,
         avoiding=np.zeros((batch, n_uav), dtype=bool),
         activated=np.zeros((batch, n_obs), dtype=bool),
         restored=np.zeros((batch, n_obs), dtype=bool),
         active_obstacle=active_obstacle,
+        route_correction=np.zeros((batch, 3)) if correction is None else correction,
     )
 
 

@@ -208,16 +208,24 @@ def horizon_problems(
     dt, horizon = scenario.dynamics.dt, scenario.cost.horizon
     batch, n = decoded.velocity.shape[:2]
     now = observed_time(decoded.time_fraction, scenario.duration, dt).reshape(-1)
+    reference_now = decoded.reference_velocity.reshape(-1, 3)
+    if isinstance(decoded, DecodedLocalObservation):  # its legs hold the route-return term
+        schedule, correction = observed_schedule(decoded, now), None
+    else:
+        schedule, correction = scenario.schedule, None
+        if scenario.avoidance.route_gain > 0:
+            # the route-return term is what the reference of a UAV that is not avoiding holds
+            # beyond the preset velocity (avoiding UAVs hold their reference anyway)
+            correction = reference_now - topology.preset_velocity(schedule, now)
     # Each UAV's own time, reference and avoiding flag: a batch of B·N single-UAV previews.
     preview = topology.reference_preview(
-        observed_schedule(decoded, now)
-        if isinstance(decoded, DecodedLocalObservation)
-        else scenario.schedule,
+        schedule,
         now,
         dt,
         horizon,
-        decoded.reference_velocity.reshape(-1, 1, 3),
+        reference_now[:, None, :],
         decoded.avoiding.reshape(-1, 1),
+        correction,
     ).reshape(batch, n, horizon + 1, 3)
     if isinstance(decoded, DecodedLocalObservation):
         if decoded.neighbour_index is None:
