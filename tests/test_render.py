@@ -267,7 +267,7 @@ def test_render_episode_frames_are_the_renderer_on_the_simulated_states():
     """Frame k is TopViewRenderer on the state after k steps: positions, references, groups,
     the observed communication graph (split at O1 in the last frames) and collisions."""
     policy = make_policy("heuristic", SHORT)
-    recorder = AdjacencyRecorder(policy, N)
+    recorder = AdjacencyRecorder(policy, SCENARIO)
     batch = run_episodes(SHORT, recorder, [0])
     adjacency = recorder.adjacency(batch.n_steps + 1)
     # a 60 m view: the UAVs far enough apart in pixels for the edges to show between markers
@@ -336,3 +336,29 @@ def test_render_episode_mp4(tmp_path):
     frames, seconds = ffmpeg.count_frames_and_secs(str(path))
     assert frames == 31
     assert seconds == pytest.approx(3.1)
+
+
+def test_render_a_swarm_of_100_on_the_local_layout(tmp_path):
+    """The local layout's graph is the in-neighbours in each UAV's slots: at N = 100 (4-nearest
+    graph) every recorded link is a link of H, and a UAV with at most k in-neighbours shows them
+    all; render_episode writes the swarm's animation."""
+    from uav_formation_env.config_io import resolve_scenario
+    from uav_formation_env.episode import FormationEpisodes
+
+    swarm = with_overrides(resolve_scenario("swarm_100"), {"duration": 2.0})
+    policy = make_policy("heuristic", swarm)
+    recorder = AdjacencyRecorder(policy, swarm)
+    assert recorder.needs_neighbour_index
+    episodes = FormationEpisodes(swarm, 1)
+    step = episodes.reset(seed=0)
+    k = swarm.observation.neighbours
+    for _ in range(3):
+        actions = recorder.act_batch(step.observation, step.neighbour_index)
+        recorded, true = recorder._adjacency[-1], step.result.adjacency[0]
+        assert (recorded <= true).all() and recorded.sum() > 100
+        few = true.sum(axis=1) <= k
+        np.testing.assert_array_equal(recorded[few], true[few])
+        step = episodes.step(actions)
+    out = render_episode(swarm, policy, 0, tmp_path / "swarm.gif", every=5, progress=False)
+    with Image.open(out) as gif:
+        assert gif.n_frames == len(range(0, swarm.n_steps + 1, 5))

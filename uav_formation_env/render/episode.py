@@ -21,6 +21,7 @@ import numpy as np
 from tqdm import tqdm
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.local_observation import decode_local_observations
 from uav_formation_env.core.observation import decode_observations, others_index
 from uav_formation_env.render.gif import write_gif
 from uav_formation_env.render.top_view import TopViewRenderer
@@ -80,7 +81,7 @@ def render_episode(
     every = int(every)
     ffmpeg = _imageio_ffmpeg() if suffix == ".mp4" else None
 
-    recorder = AdjacencyRecorder(policy, scenario.n_uav)
+    recorder = AdjacencyRecorder(policy, scenario)
     batch = run_episodes(
         scenario,
         recorder,
@@ -102,26 +103,43 @@ def render_episode(
 class AdjacencyRecorder:
     """Wraps a policy and records, at every call, copy 0's communication graph H.
 
-    H is rebuilt from the neighbour flags in the observations (``h_ij`` of UAV i for every other
-    UAV j). Every other attribute (``reset``, ``records``, ``plans``, ...) is the wrapped
-    policy's, so the runner sees the policy itself.
+    H is rebuilt from the neighbour flags in the observations: on the full layout ``h_ij`` of
+    UAV i for every other UAV j (exact); on the local layout the in-neighbours in UAV i's slots
+    (with the slot index that comes with the observation), so a UAV with more than k
+    in-neighbours shows its k nearest. Every other attribute (``reset``, ``records``, ``plans``,
+    ...) is the wrapped policy's, so the runner sees the policy itself.
 
     Args:
         policy: the wrapped policy.
-        n_uav: number of UAVs N.
+        scenario: the scenario flown (N and the observation layout).
     """
 
-    def __init__(self, policy: Any, n_uav: int) -> None:
+    def __init__(self, policy: Any, scenario: Scenario) -> None:
         self.policy = policy
-        self.n_uav = int(n_uav)
+        self.n_uav = int(scenario.n_uav)
+        self.observation = scenario.observation
+        # the local layout's graph needs the slot index, whether the policy needs it or not
+        self.needs_neighbour_index = self.observation.kind == "local"
+        self._forward_index = getattr(policy, "needs_neighbour_index", False)
         self._adjacency: list[np.ndarray] = []
 
-    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+    def act_batch(self, obs: np.ndarray, neighbour_index: np.ndarray | None = None) -> np.ndarray:
         n = self.n_uav
-        flags = decode_observations(np.asarray(obs)[:1], n).neighbour[0]  # (N, N-1)
         adjacency = np.zeros((n, n))
-        adjacency[np.arange(n)[:, None], others_index(n)] = flags
+        if neighbour_index is None:
+            flags = decode_observations(np.asarray(obs)[:1], n).neighbour[0]  # (N, N-1)
+            adjacency[np.arange(n)[:, None], others_index(n)] = flags
+        else:
+            config = self.observation
+            decoded = decode_local_observations(
+                np.asarray(obs)[:1], config.neighbours, config.obstacles, config.nearest
+            )
+            linked = decoded.neighbour[0] & decoded.slot_present[0]  # (N, S)
+            rows, slots = np.nonzero(linked)
+            adjacency[rows, np.asarray(neighbour_index)[0][rows, slots]] = 1.0
         self._adjacency.append(adjacency)
+        if self._forward_index:
+            return self.policy.act_batch(obs, neighbour_index)
         return self.policy.act_batch(obs)
 
     def adjacency(self, length: int) -> np.ndarray:
