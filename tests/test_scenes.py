@@ -13,7 +13,6 @@ import pytest
 
 from uav_formation_env.config import (
     FORMATION_SHAPES,
-    AvoidanceConfig,
     InitialStateConfig,
     ObstacleFieldConfig,
     RouteConfig,
@@ -77,7 +76,7 @@ def check_obstacles_on_route(drawn: Scenario, field: ObstacleFieldConfig) -> Non
     obstacles = drawn.avoidance.obstacles
     assert field.count[0] <= len(obstacles) <= field.count[1]
     # the drawn field passes AvoidanceConfig's validation when built anew
-    AvoidanceConfig(obstacles=obstacles, detection_margin=drawn.avoidance.detection_margin)
+    dataclasses.replace(drawn.avoidance, obstacles=obstacles)
     vertices = route_polyline(drawn.schedule, start_of(drawn), drawn.duration)
     reach = max(abs(a) for a in field.across)
     for k, o in enumerate(obstacles):
@@ -87,7 +86,8 @@ def check_obstacles_on_route(drawn: Scenario, field: ObstacleFieldConfig) -> Non
         assert math.dist(o.center, vertices[0]) >= field.clear_start
         for other in obstacles[k + 1 :]:
             gap = math.dist(o.center, other.center)
-            need = o.radius + other.radius + 2 * drawn.avoidance.detection_margin + field.min_gap
+            # detection circles apart, or safety circles with concurrent activation
+            need = drawn.avoidance.min_centre_distance(o.radius, other.radius) + field.min_gap
             assert gap >= need - 1e-9
 
 
