@@ -672,3 +672,12 @@ def test_route_correction_leads_back_to_the_preset_route():
     np.testing.assert_array_equal(out.route_correction, 0.0)
     np.testing.assert_allclose(out.reference_velocity[0, 2], PRESET)
     assert np.linalg.norm(out.reference_velocity[0, 0]) == pytest.approx(20.0)  # the tangent
+    # nor within an obstacle's detection circle, active or not (here done, not re-armed)
+    done = init_topology(1, 3, 1)
+    done.status[:] = DONE
+    beside = np.array([[[10.0, 60.0, 0.0], [0.0, 65.0, 0.0], [-5.0, 200.0, 0.0]]])
+    _, out = update_topology(
+        done, beside, beside * 0, t10, gain, SCHEDULE, ring(3), route_start=start
+    )
+    assert not out.avoiding.any()
+    np.testing.assert_array_equal(out.route_correction, 0.0)

@@ -283,8 +283,11 @@ def update_topology(
         # detection radius, so nothing can activate (activation needs min_i D_i < d^o).
         rel = positions[:, :, None, :2] - fast_centres
         armed = (state.status == IDLE) | (avoidance.rearm & (state.status == DONE))
-        near_idle = ((rel**2).sum(axis=-1).min(axis=1) < r_detect_sq) & armed
-        if not near_idle.any():
+        detected = (rel**2).sum(axis=-1).min(axis=1) < r_detect_sq  # (B, O); padding is far
+        if not (detected & armed).any():
+            if correction is not None and detected.any():  # see the route return below
+                correction = np.where(detected.any(axis=1)[:, None], 0.0, correction)
+                base = preset + correction
             return _copy_state(state), _idle_output(base, h0, batch, n_uav, n_obs, correction)
     e_hat, _ = heading_frame(preset)
     rel_x, rel_y, dist, lon, lat = relative_geometry(positions, centres, e_hat)  # (O, N, B)
@@ -345,9 +348,13 @@ def update_topology(
         restore_time=restore_time.T,
     )
     if correction is not None:
-        # no route return while an avoidance runs in the copy: the UAVs that are not guided
-        # (a group that has passed) would be pulled back towards the obstacle's line
-        correction = np.where((status == ACTIVE).any(axis=0)[:, None], 0.0, correction)
+        # no route return while an avoidance runs in the copy (the UAVs that are not guided, a
+        # group that has passed, would be pulled back towards the obstacle's line) nor while a
+        # UAV is within an obstacle's detection circle (random_routes seed 15: pulled back onto
+        # the route, the formation met the next obstacle too late to turn away)
+        detected = ((min_dist < r_detect_b) & present).any(axis=0)  # (B,)
+        busy = (status == ACTIVE).any(axis=0) | detected
+        correction = np.where(busy[:, None], 0.0, correction)
         base = preset + correction
     output = _idle_output(base, h0, batch, n_uav, n_obs, correction)
     output.activated = np.ascontiguousarray(activated.T)
@@ -371,11 +378,11 @@ def route_correction(
     """The route-return term of the reference outside an avoidance, or None when off.
 
     ``c = route_gain (r(t) - centroid)`` in the horizontal plane, scaled down to at most
-    ``route_correction_max`` (and 0 while an obstacle is active in the copy, see
-    :func:`update_topology`), with r(t) = ``route_start`` + the preset displacement (the point
-    where the formation would be had it flown the schedule exactly; the mission's route error is
-    ||r(t) - centroid||). It leads the formation back to its route after an avoidance, which the
-    paper's velocity-tracking J_i alone never does.
+    ``route_correction_max`` (and 0 while an obstacle is active in the copy or a UAV is within
+    an obstacle's detection circle, see :func:`update_topology`), with r(t) = ``route_start``
+    + the preset displacement (the point where the formation would be had it flown the schedule
+    exactly; the mission's route error is ||r(t) - centroid||). It leads the formation back to
+    its route after an avoidance, which the paper's velocity-tracking J_i alone never does.
 
     Args:
         avoidance: ``route_gain`` [1/s] and ``route_correction_max`` [m/s].
