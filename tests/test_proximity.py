@@ -163,3 +163,22 @@ def test_the_env_rewards_and_collisions_do_not_depend_on_the_sensing_radius():
     np.testing.assert_allclose(r_near, r_all, rtol=1e-12)
     np.testing.assert_array_equal(c_near, c_all)
     assert (s_all > 0).any()  # the random inputs did bring UAVs within d_s
+
+
+def test_every_checker_passes_on_a_swarm_with_a_sensing_radius():
+    import warnings
+
+    import gymnasium
+    from gymnasium.utils.env_checker import check_env as gym_check_env
+    from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+    from uav_formation_env import GYM_ID
+    from uav_formation_env.envs import parallel_env
+
+    swarm = with_overrides(resolve_scenario("swarm_20"), {"duration": 20.0})
+    assert swarm.observation.sensing_radius is not None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # advisory checker warnings (e.g. infinite state bounds)
+        parallel_api_test(parallel_env(scenario=swarm), num_cycles=30)
+        parallel_seed_test(lambda: parallel_env(scenario=swarm), num_cycles=30)
+        gym_check_env(gymnasium.make(GYM_ID, scenario=swarm).unwrapped)
