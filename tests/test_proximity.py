@@ -76,7 +76,7 @@ def test_separation_term_and_nearest_distance_equal_all_pairs():
     np.testing.assert_array_equal(sparse.formation, dense.formation)
 
 
-def observations(positions: np.ndarray, adjacency: np.ndarray, distance) -> tuple:
+def observations(positions: np.ndarray, adjacency: np.ndarray, distance, radius=None) -> tuple:
     batch, n_uav = positions.shape[:2]
     z = np.concatenate([positions, np.zeros_like(positions)], axis=-1)
     zeros = np.zeros((batch, n_uav, 3))
@@ -96,6 +96,7 @@ def observations(positions: np.ndarray, adjacency: np.ndarray, distance) -> tupl
         m=1,
         nearest=2,
         distance=distance,
+        sensing_radius=radius,
     )
     return local.obs, local.neighbour_index
 
@@ -114,7 +115,11 @@ def test_slots_from_sensed_pairs(seed):
     np.testing.assert_allclose(far_obs, dense_obs, atol=1e-6)
     # a small radius: every slot holds an in-neighbour or a UAV within R, and the slots are the
     # all-pairs rule applied to exactly those UAVs
-    _, index = observations(positions, adjacency, sensed_pairs(positions, radius))
+    obs, index = observations(positions, adjacency, sensed_pairs(positions, radius))
+    # the distance matrix with the radius (below GRID_MIN_UAVS): the same slots
+    matrix_obs, matrix_index = observations(positions, adjacency, pair_distances(positions), radius)
+    np.testing.assert_array_equal(matrix_index, index)
+    np.testing.assert_allclose(matrix_obs, obs, atol=1e-6)
     distance = pair_distances(positions)
     known = (adjacency != 0) | (distance <= radius)
     hidden = np.where(known, distance, np.inf)  # the others: as if infinitely far
@@ -182,3 +187,25 @@ def test_every_checker_passes_on_a_swarm_with_a_sensing_radius():
         parallel_api_test(parallel_env(scenario=swarm), num_cycles=30)
         parallel_seed_test(lambda: parallel_env(scenario=swarm), num_cycles=30)
         gym_check_env(gymnasium.make(GYM_ID, scenario=swarm).unwrapped)
+
+
+def test_the_grid_and_the_matrix_fly_the_same_episode(monkeypatch):
+    # swarm_20 uses the matrix (N < GRID_MIN_UAVS); forcing the grid must change nothing but
+    # float rounding: the same observations, slots, rewards and collisions
+    scenario = resolve_scenario("swarm_20")
+    runs = []
+    for threshold in (proximity.GRID_MIN_UAVS, 2):
+        monkeypatch.setattr(proximity, "GRID_MIN_UAVS", threshold)
+        episodes = FormationEpisodes(scenario, 2, fly_on_after_collision=True)
+        step = episodes.reset(seed=[5, 6])
+        assert isinstance(episodes.sim._pair_of[1], proximity.SensedPairs) == (threshold == 2)
+        rng = np.random.default_rng(1)
+        record = []
+        for _ in range(30):
+            step = episodes.step(rng.uniform(-1, 1, (2, 20, 3)))
+            record.append((step.observation, step.neighbour_index, step.reward))
+        runs.append(record)
+    for (obs_a, index_a, reward_a), (obs_b, index_b, reward_b) in zip(*runs):
+        np.testing.assert_array_equal(index_a, index_b)
+        np.testing.assert_allclose(obs_a, obs_b, atol=1e-6)
+        np.testing.assert_allclose(reward_a, reward_b, rtol=1e-12)

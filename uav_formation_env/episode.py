@@ -171,6 +171,7 @@ def encode_observations(
             next_velocity=next_velocity + result.route_correction,
             time_to_switch=wait,
             distance=sim.pair_distances_of(result),
+            sensing_radius=config.sensing_radius,
         )
         return local.obs, local.neighbour_index
     full = build_observations(

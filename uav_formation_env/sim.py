@@ -27,7 +27,6 @@ import numpy as np
 from uav_formation_env.config import Scenario
 from uav_formation_env.core import topology
 from uav_formation_env.core.cost import CostTerms, stage_cost
-from uav_formation_env.core.cost.stage import pair_distances
 from uav_formation_env.core.disturbances import CopyDisturbance, Disturbance
 from uav_formation_env.core.dynamics import zoh_step
 from uav_formation_env.core.initial import initial_positions
@@ -39,7 +38,7 @@ from uav_formation_env.core.observer import (
     observer_step_held,
 )
 from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
-from uav_formation_env.core.proximity import SensedPairs, sensed_pairs
+from uav_formation_env.core.proximity import SensedPairs, nearest_distance, uav_pairs
 from uav_formation_env.core.reference import CopySchedules, Schedule, copy_schedules
 from uav_formation_env.scenes import max_gust_std, max_obstacles, n_uav_range, scene_of_seed
 from uav_formation_env.seeding import check_seed
@@ -344,12 +343,7 @@ class FormationSim:
         )
         # one set of pair distances for the separation term, the nearest-UAV distance and the
         # observation: all pairs, or those within the sensing radius (linear in N)
-        radius = cfg.observation.sensing_radius
-        pair = (
-            pair_distances(self.z[..., :3])
-            if radius is None
-            else sensed_pairs(self.z[..., :3], radius)
-        )
+        pair = uav_pairs(self.z[..., :3], cfg.observation.sensing_radius)
         cost = stage_cost(
             self.z,
             u_n,
@@ -475,9 +469,9 @@ class FormationSim:
                 current positions, or their :class:`SensedPairs`, if already computed.
         """
         p = self.z[..., :3]
+        radius = self.scenario.observation.sensing_radius
         if pair is None:
-            radius = self.scenario.observation.sensing_radius
-            pair = pair_distances(p) if radius is None else sensed_pairs(p, radius)
+            pair = uav_pairs(p, radius)
         if self.obstacle_radii.shape[-1] == 0:
             surface = np.full(p.shape[:2], np.inf)
         elif self.obstacles is None:
@@ -486,8 +480,7 @@ class FormationSim:
         else:  # padding obstacles are 1e9 m away: never the nearest of a UAV on its route
             centre = topology.obstacle_distances(p, self.obstacles)
             surface = np.minimum.reduce(centre - self.obstacles.radii[:, None], axis=-1)
-        nearest = pair.nearest() if isinstance(pair, SensedPairs) else np.minimum.reduce(pair, -1)
-        return nearest, surface
+        return nearest_distance(pair, radius), surface
 
     def pair_distances_of(self, result: StepResult) -> np.ndarray | SensedPairs:
         """The UAV-UAV distances of ``result.z``: (B, N, N) [m] (+inf on the diagonal), or the
@@ -497,9 +490,7 @@ class FormationSim:
         z, pair = self._pair_of
         if z is result.z:
             return pair
-        radius = self.scenario.observation.sensing_radius
-        p = result.z[..., :3]
-        return pair_distances(p) if radius is None else sensed_pairs(p, radius)
+        return uav_pairs(result.z[..., :3], self.scenario.observation.sensing_radius)
 
     def reference_preview(self) -> np.ndarray:
         """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held)."""

@@ -239,14 +239,22 @@ class _Candidates:
 
 
 def _candidates(
-    distance: np.ndarray | SensedPairs, adjacency: np.ndarray, positions: np.ndarray
+    distance: np.ndarray | SensedPairs,
+    adjacency: np.ndarray,
+    positions: np.ndarray,
+    radius: float | None = None,
 ) -> _Candidates:
-    """All other UAVs (a distance matrix), or the in-neighbours and the sensed UAVs (pairs within
-    the sensing radius): the only UAVs a slot can hold, O(N) per receiver or O(1)."""
+    """The UAVs a slot can hold: the in-neighbours and the UAVs within the sensing radius (all
+    other UAVs without one), from a distance matrix (O(N) per receiver) or from the sensed
+    pairs (O(1) per receiver)."""
     batch, n_uav = adjacency.shape[:2]
     if not isinstance(distance, SensedPairs):
         uav = np.broadcast_to(np.arange(n_uav), (batch, n_uav, n_uav))
-        return _Candidates(uav, distance, adjacency != 0, None)
+        neighbour = adjacency != 0
+        if radius is None:
+            return _Candidates(uav, distance, neighbour, None)
+        # the same candidates as the grid's: unheard UAVs beyond R (and the diagonal) are absent
+        return _Candidates(uav, distance, neighbour, ~neighbour & ~(distance <= radius))
     # in-neighbours (communication) and sensed UAVs (within R), each pair once, sorted by
     # receiver then sender
     b, i, j = np.nonzero(adjacency)
@@ -330,6 +338,7 @@ def build_local_observations(
     time_to_switch: np.ndarray | None = None,
     nearest: int = 2,
     distance: np.ndarray | SensedPairs | None = None,
+    sensing_radius: float | None = None,
 ) -> LocalObservations:
     """Every agent's local observation (length independent of N).
 
@@ -357,6 +366,8 @@ def build_local_observations(
             if the caller has them, or the :class:`~uav_formation_env.core.proximity.
             SensedPairs` within a sensing radius (then the slots hold in-neighbours and sensed
             UAVs only); None: all pairs, computed here.
+        sensing_radius: R of a ``distance`` matrix: only in-neighbours and UAVs within R fill
+            slots, as with the sensed pairs; None: every UAV.
 
     Returns:
         :class:`LocalObservations` with obs (B, N, dim) and neighbour_index (B, N, k + nearest).
@@ -383,7 +394,8 @@ def build_local_observations(
     # neighbour slots, then proximity slots
     if distance is None:
         distance = pair_distances(z[..., :3])
-    neighbour_index = _select_slots(_candidates(distance, adjacency, z[..., :3]), k, nearest)
+    candidates = _candidates(distance, adjacency, z[..., :3], sensing_radius)
+    neighbour_index = _select_slots(candidates, k, nearest)
     present = neighbour_index >= 0
     safe = np.where(present, neighbour_index, 0)
     flat = safe + (np.arange(batch) * n_uav)[:, None, None]  # into the (B·N) flattening

@@ -8,7 +8,7 @@ from functools import lru_cache
 import numpy as np
 
 from uav_formation_env.config import CostConfig
-from uav_formation_env.core.proximity import SensedPairs, gap_sq
+from uav_formation_env.core.proximity import SensedPairs, gap_sq, pair_distances
 
 
 @dataclass(frozen=True)
@@ -252,23 +252,6 @@ def separation_sq(
 def _gap_sq_sum(pair: np.ndarray, weight: np.ndarray, distance: float, axis: int) -> np.ndarray:
     """``Σ_axis weight max(0, d_s - pair)²`` of pair distances [m] (shapes broadcast) [m²]."""
     return (gap_sq(pair, distance) * weight).sum(axis=axis)
-
-
-def pair_distances(positions: np.ndarray) -> np.ndarray:
-    """Distance between every two UAVs of a copy, with +inf on the diagonal.
-
-    Args:
-        positions: (B, N, 3) [m].
-
-    Returns:
-        (B, N, N) ``||p_i - p_j||`` [m]; ``[:, i, i]`` is +inf, so that a minimum over j is the
-        nearest other UAV.
-    """
-    batch, n_uav = positions.shape[:2]
-    diff = positions[:, :, None, :] - positions[:, None, :, :]
-    flat = np.sqrt(np.einsum("...k,...k->...", diff, diff)).reshape(batch, n_uav * n_uav)
-    flat[:, :: n_uav + 1] = np.inf
-    return flat.reshape(batch, n_uav, n_uav)
 
 
 def stage_cost(
