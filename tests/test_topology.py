@@ -681,3 +681,20 @@ def test_route_correction_leads_back_to_the_preset_route():
     )
     assert not out.avoiding.any()
     np.testing.assert_array_equal(out.route_correction, 0.0)
+
+
+def test_split_graph_base_keeps_h0_edges_inside_each_group():
+    # the case-2 split of test_case2_split_by_sign_block_adjacency's kind, on a ring H0
+    xy = [(-50.0, 10.0), (-50.0, 25.0), (-50.0, -10.0), (-50.0, -25.0)]
+    h0 = ring(4)  # i receives from i + 1 (mod 4)
+    _, complete = step(xy, h0=h0)
+    _, base = step(xy, h0=h0, avoidance=dataclasses.replace(ONE, split_graph="base"))
+    same = np.array([[0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1], [0, 0, 1, 0]], dtype=float)
+    np.testing.assert_array_equal(complete.adjacency[0], same)
+    # only 0 <- 1 and 2 <- 3 of the ring lie inside a group
+    expected = np.zeros((4, 4))
+    expected[0, 1] = expected[2, 3] = 1.0
+    np.testing.assert_array_equal(base.adjacency[0], expected)
+    np.testing.assert_array_equal(base.reference_velocity, complete.reference_velocity)
+    with pytest.raises(ValueError, match="avoidance.split_graph"):
+        dataclasses.replace(ONE, split_graph="sparse")

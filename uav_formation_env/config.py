@@ -278,10 +278,18 @@ class AvoidanceConfig:
     # route_correction_max; 0 is the paper (the preset velocity alone) [1/s], [m/s]
     route_gain: float = 0.0
     route_correction_max: float = 5.0
+    # the graph inside a sub-formation while an obstacle is active: "complete" (the paper) or
+    # "base" (H0's own edges inside it: a swarm's in-degree stays small, docs/scenarios.md)
+    split_graph: str = "complete"
 
     def __post_init__(self) -> None:
         _non_negative(self.route_gain, "avoidance.route_gain")
         _non_negative(self.route_correction_max, "avoidance.route_correction_max")
+        _require(
+            self.split_graph in ("complete", "base"),
+            "avoidance.split_graph",
+            f"must be 'complete' or 'base', got {self.split_graph!r}",
+        )
         for name in ("concurrent", "rearm"):
             _require(
                 isinstance(getattr(self, name), bool),

@@ -469,7 +469,10 @@ def _avoidance_output(
     # 1. H: complete inside each cell of the joint split of the active obstacles
     differ = (side[:, :, None] != side[:, None, :]) & active[:, None, None]  # (O, N, N, B)
     same = ~differ.any(axis=0) & ~np.eye(n_uav, dtype=bool)[:, :, None]  # (N, N, B)
-    output.adjacency[has_active] = _batch_first(same)[has_active]
+    if avoidance.split_graph == "complete":
+        output.adjacency[has_active] = _batch_first(same)[has_active]
+    else:  # "base": H0's own edges inside each cell (output.adjacency holds H0 here)
+        output.adjacency[has_active] = (output.adjacency * _batch_first(same))[has_active]
     # groups: bit r set when on side -1 of the r-th split (case 2) active obstacle of the copy
     split = active & (case == 2)  # (O, B)
     rank = np.cumsum(split, axis=0) - 1  # (O, B)
