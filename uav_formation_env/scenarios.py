@@ -46,6 +46,7 @@ import numpy as np
 
 from uav_formation_env.config import (
     PAPER_OBSTACLES,
+    AvoidanceConfig,
     DisturbanceConfig,
     FormationConfig,
     InitialStateConfig,
@@ -223,44 +224,43 @@ DRAWN_AVOIDANCE = {
     "route_gain": 0.05,
     "route_correction_max": 5.0,
 }
-# with concurrent activation only the safety circles (radius + 10 m) must be apart; 60 m more keeps
-# the fields of random_fields and random_swarm as they were (detection circles, radius + 40 m,
-# apart)
-DETECTION_APART = 2 * (40.0 - 10.0)
+# with concurrent activation only the safety circles must be apart; this much more keeps the
+# fields of random_fields and random_swarm as they were (detection circles apart): 60 m [m]
+DETECTION_APART = 2 * (AvoidanceConfig().detection_margin - AvoidanceConfig().safety_margin)
+
+
+def _drawn(name: str, scene: SceneConfig, observation: ObservationConfig | None = None) -> Scenario:
+    """The paper's scenario with ``scene`` drawn per reset and the avoidance rules of
+    :data:`DRAWN_AVOIDANCE`."""
+    base = Scenario()
+    return replace(
+        base,
+        name=name,
+        avoidance=replace(base.avoidance, **DRAWN_AVOIDANCE),
+        scene=scene,
+        observation=base.observation if observation is None else observation,
+    )
 
 
 def random_fields_scenario() -> Scenario:
     """The paper's scenario with a random obstacle field drawn each reset (module docstring)."""
-    base = Scenario()
     # the V's half-width: obstacles at most this far to the side still cross the formation
-    half_width = max(abs(row[1]) for row in base.formation.offsets)
+    half_width = max(abs(row[1]) for row in Scenario().formation.offsets)
     field = ObstacleFieldConfig(
         count=(1, 4), across=(-half_width, half_width), min_gap=DETECTION_APART
     )
-    return replace(
-        base,
-        name="random_fields",
-        avoidance=replace(base.avoidance, **DRAWN_AVOIDANCE),
-        scene=SceneConfig(obstacles=field),
-    )
+    return _drawn("random_fields", SceneConfig(obstacles=field))
 
 
 def random_routes_scenario() -> Scenario:
     """The paper's formation on a drawn route through a dense field (module docstring)."""
-    base = Scenario()
-    half_width = max(abs(row[1]) for row in base.formation.offsets)
+    half_width = max(abs(row[1]) for row in Scenario().formation.offsets)
     field = ObstacleFieldConfig(
         count=(2, 5), across=(-half_width, half_width), near_turns=0.5, clear_start=150.0
     )
     scene = SceneConfig(route=RouteConfig(legs=(3, 5), turn=(-90.0, 90.0)), obstacles=field)
-    return replace(
-        base,
-        name="random_routes",
-        avoidance=replace(base.avoidance, **DRAWN_AVOIDANCE),
-        scene=scene,
-        # the route is drawn: only the local layout carries the next leg to the policies
-        observation=ObservationConfig(kind="local"),
-    )
+    # the route is drawn: only the local layout carries the next leg to the policies
+    return _drawn("random_routes", scene, ObservationConfig(kind="local"))
 
 
 def random_swarm_scenario() -> Scenario:
@@ -273,14 +273,7 @@ def random_swarm_scenario() -> Scenario:
         gust_std=(0.0, 0.1),
     )
     # N varies, so only the N-independent observation gives one space for every reset
-    base = Scenario()
-    return replace(
-        base,
-        name="random_swarm",
-        avoidance=replace(base.avoidance, **DRAWN_AVOIDANCE),
-        scene=scene,
-        observation=ObservationConfig(kind="local"),
-    )
+    return _drawn("random_swarm", scene, ObservationConfig(kind="local"))
 
 
 SWARM_SENSING_RADIUS = 25.0  # [m], observation.sensing_radius of swarm_scenario
