@@ -33,6 +33,10 @@ Table of the episode options (``scenario.episode``; units; all off by default):
 ``fly_on_after_collision=True`` (the evaluation runner's rule, a constructor option) keeps flying a
 copy after a collision in ``"terminate"`` mode, so that every seed is flown to its end and its
 collisions are counted; training and evaluation apply the same rules unless told otherwise.
+
+Backends: ``backend="torch"`` (and ``device``) runs the simulator and every rule here on torch
+tensors (float32 observations, float64 state), the same code as on numpy; actions may then be
+tensors on that device (docs/architecture.md, "Backends").
 """  # noqa: E501
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.array_api import namespace, to_numpy
 from uav_formation_env.core.cost import anchored
 from uav_formation_env.core.local_observation import (
     build_local_observations,
@@ -196,6 +201,7 @@ def global_state(sim: FormationSim, result: StepResult) -> np.ndarray:
     velocities / 20 m/s, reference velocities / 20 m/s, estimates / 0.5 m/s², t / duration, the
     adjacency matrix."""
     batch = result.z.shape[0]
+    xp = namespace(result.z)
     parts = (
         result.z[..., :3].reshape(batch, -1) / DISTANCE_SCALE,
         result.z[..., 3:].reshape(batch, -1) / VELOCITY_SCALE,
@@ -204,7 +210,7 @@ def global_state(sim: FormationSim, result: StepResult) -> np.ndarray:
         (result.t / sim.scenario.duration)[:, None],
         result.adjacency.reshape(batch, -1),
     )
-    return np.concatenate(parts, axis=-1).astype(np.float32)
+    return xp.astype(xp.concat(parts, axis=-1), xp.float32)
 
 
 @dataclass(slots=True)
@@ -259,6 +265,9 @@ class FormationEpisodes:
             (evaluation flies every seed to its end and counts the collisions).
         n_uav: N of a scene distribution that draws N per reset (see
             :class:`~uav_formation_env.sim.FormationSim`).
+        backend: ``"numpy"`` or ``"torch"``: the array library of the simulator and of every
+            array an :class:`EpisodeStep` holds.
+        device: the torch device (default CPU).
     """
 
     def __init__(
@@ -269,9 +278,14 @@ class FormationEpisodes:
         autoreset: bool = False,
         fly_on_after_collision: bool = False,
         n_uav: int | None = None,
+        backend: str = "numpy",
+        device: object = None,
     ) -> None:
         self.scenario = scenario
-        self.sim = FormationSim(scenario, batch_size=batch_size, n_uav=n_uav)
+        self.sim = FormationSim(
+            scenario, batch_size=batch_size, n_uav=n_uav, backend=backend, device=device
+        )
+        self.xp = self.sim.xp
         self.batch_size = self.sim.batch_size
         self.n_uav = self.sim.n_uav
         self.u_max = scenario.dynamics.u_max
@@ -286,15 +300,22 @@ class FormationEpisodes:
         self._end_on_collision = collision.mode == "terminate" and not self.fly_on_after_collision
         self._corridor = episode.corridor_width > 0
         self._divergence = episode.max_formation_error > 0 or episode.max_velocity_error > 0
-        self._no_copy = _read_only(np.zeros(self.batch_size, dtype=bool))
-        self._no_penalty = _read_only(np.zeros((self.batch_size, self.n_uav)))
+        self._no_copy = self._constant(np.zeros(self.batch_size, dtype=bool))
+        self._no_penalty = self._constant(np.zeros((self.batch_size, self.n_uav)))
+
+    def _constant(self, array: np.ndarray):
+        """A constant shared by every step (no allocation per step), on the simulator's device;
+        read-only on numpy, so consumers cannot modify it."""
+        if self.sim.backend == "numpy":
+            return _read_only(array)
+        return self.sim._put(array)
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> EpisodeStep:
         """Start new episodes in every copy, or in those where ``mask`` is True (see
         :meth:`FormationSim.reset` for ``seed``)."""
         result = self.sim.reset(seed=seed, mask=mask)
-        reset = np.ones(self.batch_size, dtype=bool) if mask is None else np.asarray(mask)
+        reset = np.ones(self.batch_size, dtype=bool) if mask is None else to_numpy(mask)
         starts = self._start_steps(reset)
         if starts.any():
             result = self._fly_to(starts)
@@ -336,20 +357,28 @@ class FormationEpisodes:
 
     def _checked(self, actions: np.ndarray) -> np.ndarray:
         """(B, N, 3) actions as finite floats clipped to [-1, 1], or a ValueError naming the
-        copy and agent."""
-        actions = np.asarray(actions)
-        if actions.dtype.kind not in "biuf":
+        copy and agent. On torch, a tensor stays on its device (moved to the simulator's)."""
+        xp = self.xp
+        if self.sim.backend == "numpy" or isinstance(actions, np.ndarray | list | tuple):
+            actions = np.asarray(actions)
+            if actions.dtype.kind not in "biuf":
+                raise ValueError(f"actions must be real numbers, got dtype {actions.dtype}")
+            actions = self.sim._put(actions.astype(float))
+        elif not xp.isdtype(actions.dtype, ("bool", "integral", "real floating")):
             raise ValueError(f"actions must be real numbers, got dtype {actions.dtype}")
         expected = (self.batch_size, self.n_uav, 3)
-        if actions.shape != expected:
-            raise ValueError(f"actions must have shape {expected}, got {actions.shape}")
-        if not np.isfinite(actions).all():
-            copy, agent = np.argwhere(~np.isfinite(actions))[0, :2]
+        if tuple(actions.shape) != expected:
+            raise ValueError(f"actions must have shape {expected}, got {tuple(actions.shape)}")
+        if self.sim.backend != "numpy":
+            actions = xp.asarray(actions, dtype=xp.float64, device=self.sim.device)
+        finite = xp.isfinite(actions)
+        if not bool(finite.all()):
+            copy, agent = np.argwhere(~to_numpy(finite))[0, :2]
             raise ValueError(
                 f"actions contain NaN or infinite values (first: copy {copy}, uav_{agent})"
             )
-        # np.clip for finite values, without its Python wrappers
-        return np.minimum(np.maximum(actions.astype(float), -1.0), 1.0)
+        # clip for finite values, without numpy's Python wrappers
+        return xp.minimum(xp.maximum(actions, -1.0), 1.0)
 
     def _step(self, clipped: np.ndarray) -> EpisodeStep:
         result = self.sim.step(clipped * self.u_max)
@@ -357,7 +386,8 @@ class FormationEpisodes:
         penalty = self.penalties(result)
         left = self._left_corridor(result) if self._corridor else self._no_copy
         if self._corridor and left.any() and self.scenario.episode.corridor_penalty > 0:
-            penalty = penalty + self.scenario.episode.corridor_penalty * left[:, None]
+            left_now = self.xp.astype(left[:, None], cost.dtype)  # torch: bool * float is float32
+            penalty = penalty + self.scenario.episode.corridor_penalty * left_now
         terminated = left | result.collision.any(axis=1) if self._end_on_collision else left
         diverged = self._diverged(result) & ~terminated if self._divergence else self._no_copy
         if self._corridor or self._end_on_collision or self._divergence:
@@ -381,9 +411,10 @@ class FormationEpisodes:
             step.final_observation = step.observation
             step.reset = done
             fresh = self.reset(seed=None, mask=done)
-            step.observation = np.where(done[:, None, None], fresh.observation, step.observation)
+            xp = self.xp
+            step.observation = xp.where(done[:, None, None], fresh.observation, step.observation)
             if neighbour_index is not None:
-                step.neighbour_index = np.where(
+                step.neighbour_index = xp.where(
                     done[:, None, None], fresh.neighbour_index, neighbour_index
                 )
         self.last = step
@@ -407,7 +438,10 @@ class FormationEpisodes:
         controller (in a second simulator, so that the other copies do not move), then adopt
         it. Returns the simulator's :class:`StepResult` after the adoption."""
         if self._flight is None:
-            self._flight = FormationSim(self.scenario, self.batch_size, n_uav=self.n_uav)
+            sim = self.sim
+            self._flight = FormationSim(
+                self.scenario, self.batch_size, self.n_uav, sim.backend, sim.device
+            )
             self._flight.adopt(np.ones(self.batch_size, dtype=bool), self.sim)
         flight, cfg = self._flight, self.scenario
         pending = starts > 0
@@ -415,11 +449,12 @@ class FormationEpisodes:
         result = self.sim.last
         for k in range(1, int(starts.max()) + 1):
             last = flight.last
+            # the start controller is a numpy policy: on torch it reads host copies
             u = consensus_pd(
-                flight.z,
-                last.reference_velocity,
-                last.adjacency,
-                flight.offsets,
+                to_numpy(flight.z),
+                to_numpy(last.reference_velocity),
+                to_numpy(last.adjacency),
+                to_numpy(flight.offsets),
                 self.u_max,
                 mirrored=cfg.formation.mirrored_offsets,
             )
@@ -437,13 +472,15 @@ class FormationEpisodes:
         if episode.reward == "raw":
             return -cost if penalty is self._no_penalty else -(cost + penalty)
         scaled = (cost + penalty) / episode.reward_scale
-        return -scaled if episode.reward == "scaled" else -np.log1p(scaled)
+        return -scaled if episode.reward == "scaled" else -self.xp.log1p(scaled)
 
     def penalties(self, result: StepResult) -> np.ndarray:
         """(B, N) collision penalty of each agent in this step (0 unless mode is "penalty")."""
         if not self._penalty_mode:
             return self._no_penalty
-        return self.scenario.collision.penalty * result.collision
+        # torch: bool * float would be float32
+        collided = self.xp.astype(result.collision, result.z.dtype)
+        return self.scenario.collision.penalty * collided
 
     def _left_corridor(self, result: StepResult) -> np.ndarray:
         centroid = result.z[..., :3].mean(axis=1)
@@ -452,15 +489,16 @@ class FormationEpisodes:
 
     def _diverged(self, result: StepResult) -> np.ndarray:
         episode = self.scenario.episode
-        diverged = _false(result.t)
+        xp = self.xp
+        diverged = self._no_copy
         if episode.max_formation_error > 0:
             formation = self.scenario.formation
             a = anchored(result.z, self.sim.offsets, formation.mirrored_offsets)[..., :3]
-            spread = np.linalg.norm(a - a.mean(axis=1, keepdims=True), axis=-1)
-            diverged = diverged | (spread.max(axis=1) > episode.max_formation_error)
+            spread = xp.linalg.vector_norm(a - xp.mean(a, axis=1, keepdims=True), axis=-1)
+            diverged = diverged | (xp.max(spread, axis=1) > episode.max_formation_error)
         if episode.max_velocity_error > 0:
-            error = np.linalg.norm(result.z[..., 3:] - result.reference_velocity, axis=-1)
-            diverged = diverged | (error.max(axis=1) > episode.max_velocity_error)
+            error = xp.linalg.vector_norm(result.z[..., 3:] - result.reference_velocity, axis=-1)
+            diverged = diverged | (xp.max(error, axis=1) > episode.max_velocity_error)
         return diverged
 
     # ------------------------------------------------------------------ views
@@ -475,10 +513,6 @@ class FormationEpisodes:
         if self.last is None:
             raise RuntimeError("call reset() first")
         return global_state(self.sim, self.sim.last)
-
-
-def _false(like: np.ndarray) -> np.ndarray:
-    return np.zeros(like.shape[0], dtype=bool)
 
 
 def _read_only(array: np.ndarray) -> np.ndarray:

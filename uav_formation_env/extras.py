@@ -13,6 +13,7 @@ EXTRAS = {
     "ray": "ray",
     "ray.rllib": "rllib",
     "imageio_ffmpeg": "video",
+    "torchrl": "torchrl",
 }
 
 

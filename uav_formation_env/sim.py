@@ -14,6 +14,12 @@ Order of one control step (docs/model.md §1.4, §3.3, §3.4, §7):
 3. Observer over its inner ticks on the exact velocity samples; plant ZOH step over δ.
 4. ``t += δ``; topology update at the new positions (adjacency, groups, reference velocity).
 5. Stage cost of J_i at the new state with the applied ``u_n`` (the reward is minus its total).
+
+Backends (docs/architecture.md, "Backends"): ``backend="numpy"`` (default) or ``"torch"`` on any
+device. The state and every array of a :class:`StepResult` live on the backend's device; the core
+functions are the same array-API code on both. Randomness stays on the host: each copy's numpy
+Generator draws its scene, start and noise blocks exactly as on numpy, and the drawn values are
+moved to the device, so a seed names the same episode on both backends.
 """
 
 from __future__ import annotations
@@ -26,6 +32,8 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core import topology
+from uav_formation_env.core.array_api import amin, backend_device, namespace_of_backend
+from uav_formation_env.core.array_api import copy as copy_array
 from uav_formation_env.core.cost import CostTerms, stage_cost
 from uav_formation_env.core.disturbances import CopyDisturbance, Disturbance
 from uav_formation_env.core.dynamics import zoh_step
@@ -84,17 +92,26 @@ def _seeds_for(seed: SeedLike, count: int) -> list[int | None]:
     return seeds
 
 
-def _where_batch(mask: np.ndarray, new, old):
-    """Fieldwise ``where(mask)`` over the leading batch axis of two dataclasses of arrays."""
+def _where_batch(mask, new, old):
+    """Fieldwise ``where(mask)`` over the leading batch axis of two dataclasses of arrays (numpy
+    or torch; ``mask`` (B,) bool of the same library)."""
+    xp = namespace_of_backend("numpy" if isinstance(mask, np.ndarray) else "torch")
     out = {}
     for f in fields(old):
         a, b = getattr(new, f.name), getattr(old, f.name)
         if is_dataclass(b):
             out[f.name] = _where_batch(mask, a, b)
         else:
-            m = mask.reshape(mask.shape + (1,) * (np.ndim(b) - 1))
-            out[f.name] = np.where(m, a, b)
+            m = xp.reshape(mask, mask.shape + (1,) * (b.ndim - 1))
+            out[f.name] = xp.where(m, a, b)
     return replace(old, **out)
+
+
+def _host(values, dtype) -> np.ndarray:
+    """A mask or index array given as numpy, a list or a torch tensor, as a numpy array."""
+    if not isinstance(values, np.ndarray | list | tuple) and hasattr(values, "cpu"):
+        values = values.cpu().numpy()
+    return np.asarray(values, dtype=dtype)
 
 
 def _scene_n_uav(scenario: Scenario, n_uav: int | None) -> int:
@@ -130,11 +147,23 @@ class FormationSim:
         batch_size: number of copies B.
         n_uav: N of a distribution that draws N per reset (every copy of a simulator has the same
             N; a reset whose seed draws another N raises ValueError and changes nothing).
+        backend: array library of the state, ``"numpy"`` or ``"torch"`` (float64 on both).
+        device: where a torch state lives (``"cpu"``, ``"cuda"``, ...; default CPU); numpy: "cpu".
     """
 
-    def __init__(self, scenario: Scenario, batch_size: int = 1, n_uav: int | None = None) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        batch_size: int = 1,
+        n_uav: int | None = None,
+        backend: str = "numpy",
+        device: object = None,
+    ) -> None:
         if not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        self.xp = namespace_of_backend(backend)
+        self.backend = backend
+        self.device = backend_device(backend, device)
         self.scenario = scenario
         self.batch_size = int(batch_size)
         self.n_uav = _scene_n_uav(scenario, n_uav)
@@ -186,6 +215,30 @@ class FormationSim:
         self.last: StepResult | None = None  # None until the first reset
         # the states of the last step's result and their pair distances (see pair_distances_of)
         self._pair_of: tuple[np.ndarray | None, np.ndarray | SensedPairs] = (None, np.zeros(0))
+        if backend != "numpy":  # everything the step reads, on the device
+            for name in ("offsets", "base_adjacency", "obstacle_centers", "obstacle_radii"):
+                setattr(self, name, self._put(getattr(self, name)))
+            for name in ("z", "gust", "t", "route_start", "steps"):
+                setattr(self, name, self._put(getattr(self, name)))
+            self.obstacles = self._put_fields(self.obstacles)
+            self.copy_disturbance = self._put_fields(self.copy_disturbance)
+            if isinstance(self.schedule, CopySchedules):
+                self.schedule = self._put_fields(self.schedule)
+            self.observer = self._put_fields(self.observer)
+            self.topology = self._put_fields(self.topology)
+
+    # ------------------------------------------------------------------ backend
+    def _put(self, values):
+        """A numpy array as an array of this simulator's backend and device (numpy: itself)."""
+        if self.backend == "numpy":
+            return values
+        return self.xp.asarray(np.ascontiguousarray(values), device=self.device)
+
+    def _put_fields(self, data):
+        """A dataclass of numpy arrays with every array moved by :meth:`_put` (None: None)."""
+        if data is None or self.backend == "numpy":
+            return data
+        return replace(data, **{f.name: self._put(getattr(data, f.name)) for f in fields(data)})
 
     # ------------------------------------------------------------------ reset
     def reset(self, seed: SeedLike = None, mask: np.ndarray | None = None) -> StepResult:
@@ -208,7 +261,7 @@ class FormationSim:
             mask = np.ones(B, dtype=bool)
         elif self.last is None:
             raise ValueError("the first reset must reset every copy (mask=None)")
-        mask = np.asarray(mask, dtype=bool)
+        mask = _host(mask, bool)
         if mask.shape != (B,):
             raise ValueError(f"mask must have shape ({B},), got {mask.shape}")
         indices = np.flatnonzero(mask)
@@ -230,66 +283,78 @@ class FormationSim:
                     f"simulator has n_uav={N}"
                 )
             draws.append((b, stream, rng, scene))
-        for b, stream, rng, scene in draws:
+        # the reset copies' starts, drawn on the host in the same order on every backend
+        z = np.empty((len(draws), N, 6))
+        gust = np.empty((len(draws), N, 3))
+        for row, (b, stream, rng, scene) in enumerate(draws):
             self._seed_streams[b], self._rngs[b], self.scenes[b] = stream, rng, scene
             initial = scene.initial
             low, high = np.asarray(initial.position_low), np.asarray(initial.position_high)
-            self.z[b, :, :3] = initial_positions(rng, N, low, high, initial.min_spacing)
-            self.z[b, :, 3:] = initial.velocity
+            z[row, :, :3] = initial_positions(rng, N, low, high, initial.min_spacing)
+            z[row, :, 3:] = initial.velocity
             if cfg.scene is not None:
                 self._set_scene(b, scene)
-            self.gust[b] = self.disturbance.initial_gust(rng, scene.disturbance.gust_std)
+            gust[row] = self.disturbance.initial_gust(rng, scene.disturbance.gust_std)
             self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)
-        self.route_start[mask] = self.z[mask, :, :3].mean(axis=1)
         self.noise_pos[mask] = 0
         self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
-        self.t[mask] = 0.0
-        self.steps[mask] = 0
-        self.observer = _where_batch(mask, observer_init(self.z[..., 3:]), self.observer)
-        self.topology = topology.reset_topology(self.topology, mask)
-        zeros = np.zeros((B, N, 3))
-        result = self._finish(mask, zeros, zeros, zeros, zeros)
+        at = self._put(indices)
+        self.z[at], self.gust[at] = self._put(z), self._put(gust)
+        self.route_start[at] = self._put(z[:, :, :3].mean(axis=1))
+        self.t[at] = 0.0
+        self.steps[at] = 0
+        on = self._put(mask)
+        self.observer = _where_batch(on, observer_init(self.z[..., 3:]), self.observer)
+        self.topology = topology.reset_topology(self.topology, on)
+        zeros = self.xp.zeros((B, N, 3), dtype=self.z.dtype, device=self.device)
+        result = self._finish(on, zeros, zeros, zeros, zeros)
         if self.last is not None and not mask.all():
-            result = _where_batch(mask, result, self.last)
+            result = _where_batch(on, result, self.last)
         self.last = result
         return result
 
     def _set_scene(self, copy: int, scene: Scenario) -> None:
         """Write a drawn scene into copy ``copy``'s per-copy arrays."""
-        self.offsets[copy] = scene.formation.offsets
-        self.base_adjacency[copy] = scene.formation.adjacency
+        self.offsets[copy] = self._put(np.asarray(scene.formation.offsets, dtype=float))
+        self.base_adjacency[copy] = self._put(np.asarray(scene.formation.adjacency, dtype=float))
         assert self.obstacles is not None and self.copy_disturbance is not None
         self.obstacles.set_copy(copy, scene.avoidance)
         self.copy_disturbance.set_copy(copy, scene.disturbance)
         if isinstance(self.schedule, CopySchedules):
             row = copy_schedules([scene.schedule], self.schedule.velocities.shape[1])
-            self.schedule.times[copy], self.schedule.velocities[copy] = row.times, row.velocities
+            self.schedule.times[copy] = self._put(row.times[0])
+            self.schedule.velocities[copy] = self._put(row.velocities[0])
 
     # ------------------------------------------------------------------ step
     def step(self, u_n: np.ndarray) -> StepResult:
         """Advance every copy by one control step δ.
 
         Args:
-            u_n: (B, N, 3) formation input [m/s^2]; finite values, clipped to ±u_max.
+            u_n: (B, N, 3) formation input [m/s^2]; finite values, clipped to ±u_max. An array of
+                the simulator's backend (a numpy array is moved to a torch simulator's device).
 
         Returns:
             The :class:`StepResult` after the step.
         """
         if self.last is None:
             raise RuntimeError("call reset() before step()")
-        u_n = np.asarray(u_n, dtype=float)
+        xp = self.xp
+        if self.backend == "numpy" or isinstance(u_n, np.ndarray | list | tuple):
+            u_n = self._put(np.asarray(u_n, dtype=float))
+        else:
+            u_n = xp.asarray(u_n, dtype=self.z.dtype, device=self.device)
         expected = (self.batch_size, self.n_uav, 3)
-        if u_n.shape != expected:
-            raise ValueError(f"u_n must have shape {expected}, got {u_n.shape}")
-        if not np.isfinite(u_n).all():
+        if tuple(u_n.shape) != expected:
+            raise ValueError(f"u_n must have shape {expected}, got {tuple(u_n.shape)}")
+        if not bool(xp.isfinite(u_n).all()):  # the method: numpy's xp.all adds a Python layer
             raise ValueError("u_n contains NaN or infinite values")
         obs_cfg = self.scenario.observer
-        # np.minimum(np.maximum(.)) is np.clip for finite values, without its Python wrappers
+        # minimum(maximum(.)) is clip for finite values, without numpy's Python wrappers
         u_max = self.u_max
-        u_n = np.minimum(np.maximum(u_n, -u_max), u_max)
-        u_d = compensation(self.observer, obs_cfg) if obs_cfg.enabled else np.zeros_like(u_n)
-        u = np.minimum(np.maximum(u_n + u_d, -u_max), u_max)
-        noise = self.noise[self._rows, self.noise_pos]
+        u_n = xp.minimum(xp.maximum(u_n, -u_max), u_max)
+        u_d = compensation(self.observer, obs_cfg) if obs_cfg.enabled else xp.zeros_like(u_n)
+        u = xp.minimum(xp.maximum(u_n + u_d, -u_max), u_max)
+        noise = self._put(self.noise[self._rows, self.noise_pos])
         d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust, self.copy_disturbance)
         a = u + d
         if obs_cfg.enabled:
@@ -298,7 +363,9 @@ class FormationSim:
             )
         self.z = zoh_step(self.z, a, self.dt)
         self.steps += 1
-        self.t = self.steps * self.dt  # no drift from repeated addition
+        # steps x dt: no drift from repeated addition (torch: int x float would be float32)
+        steps = self.steps if self.backend == "numpy" else self.xp.astype(self.steps, self.z.dtype)
+        self.t = steps * self.dt
         self._advance_noise()
         result = self._finish(None, u_n, u_d, u, d)
         self.last = result
@@ -359,9 +426,9 @@ class FormationSim:
         estimate = (
             disturbance_estimate(self.observer, cfg.observer)
             if cfg.observer.enabled
-            else np.zeros_like(d)
+            else self.xp.zeros_like(d)
         )
-        z = self.z.copy()
+        z = copy_array(self.z)
         self._pair_of = (z, pair)
         return StepResult(
             z=z,
@@ -375,8 +442,8 @@ class FormationSim:
             reference_velocity=out.reference_velocity,
             avoiding=out.avoiding,
             cost=cost,
-            t=self.t.copy(),
-            step=self.steps.copy(),
+            t=copy_array(self.t),
+            step=copy_array(self.steps),
             truncated=self.steps >= self._n_steps,
             min_separation=separation,
             obstacle_distance=obstacle_distance,
@@ -397,42 +464,47 @@ class FormationSim:
         Returns:
             The :class:`StepResult` of every copy after the adoption.
         """
-        mask = np.asarray(mask, dtype=bool)
+        mask = _host(mask, bool)
         if (
-            source.batch_size != self.batch_size
+            source.backend != self.backend
+            or source.batch_size != self.batch_size
             or source.n_uav != self.n_uav
             or source.scenario != self.scenario
         ):
-            raise ValueError("adopt needs a source simulator of the same scenario, N and B")
+            raise ValueError(
+                "adopt needs a source simulator of the same scenario, N, B and backend"
+            )
         if source.last is None or (self.last is None and not mask.all()):
             raise RuntimeError(
                 "adopt() needs a source that has been reset, and a reset target unless every "
                 "copy is adopted"
             )
-        for name in ("z", "gust", "noise", "noise_pos", "t", "steps", "route_start"):
+        for name in ("noise", "noise_pos"):  # on the host
             getattr(self, name)[mask] = getattr(source, name)[mask]
+        on = self._put(mask)
+        for name in ("z", "gust", "t", "steps", "route_start"):
+            getattr(self, name)[on] = getattr(source, name)[on]
         if self.scenario.scene is not None:
             assert self.obstacles is not None and source.obstacles is not None
-            self.offsets[mask] = source.offsets[mask]
-            self.base_adjacency[mask] = source.base_adjacency[mask]
-            self.obstacles.take(mask, source.obstacles)
+            self.offsets[on] = source.offsets[on]
+            self.base_adjacency[on] = source.base_adjacency[on]
+            self.obstacles.take(on, source.obstacles)
             if isinstance(self.schedule, CopySchedules):
                 assert isinstance(source.schedule, CopySchedules)
-                self.schedule.times[mask] = source.schedule.times[mask]
-                self.schedule.velocities[mask] = source.schedule.velocities[mask]
+                self.schedule.times[on] = source.schedule.times[on]
+                self.schedule.velocities[on] = source.schedule.velocities[on]
+            ours, theirs = self.copy_disturbance, source.copy_disturbance
             for name in ("amplitude", "wind", "gust_std"):
-                getattr(self.copy_disturbance, name)[mask] = getattr(source.copy_disturbance, name)[
-                    mask
-                ]
-        self.observer = _where_batch(mask, source.observer, self.observer)
-        self.topology = _where_batch(mask, source.topology, self.topology)
+                getattr(ours, name)[on] = getattr(theirs, name)[on]
+        self.observer = _where_batch(on, source.observer, self.observer)
+        self.topology = _where_batch(on, source.topology, self.topology)
         for b in np.flatnonzero(mask):
             # copies, not the objects: the source may go on drawing from its own
             self._rngs[b] = copy.deepcopy(source._rngs[b])
             self._seed_streams[b] = copy.deepcopy(source._seed_streams[b])
             self.scenes[b] = source.scenes[b]
         self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
-        self.last = source.last if self.last is None else _where_batch(mask, source.last, self.last)
+        self.last = source.last if self.last is None else _where_batch(on, source.last, self.last)
         return self.last
 
     def generator(self, copy: int) -> np.random.Generator:
@@ -447,10 +519,11 @@ class FormationSim:
         if self.obstacles is not None:
             return self.obstacles
         if self._shared_field is None:
-            row = obstacle_field([self.scenario.avoidance])
+            row = self._put_fields(obstacle_field([self.scenario.avoidance]))
+            xp = self.xp
             self._shared_field = ObstacleField(
                 *(
-                    np.broadcast_to(getattr(row, f), (self.batch_size, *getattr(row, f).shape[1:]))
+                    xp.broadcast_to(getattr(row, f), (self.batch_size, *getattr(row, f).shape[1:]))
                     for f in ("centres", "radii", "r_safe", "r_detect", "present")
                 )
             )
@@ -469,17 +542,18 @@ class FormationSim:
                 current positions, or their :class:`SensedPairs`, if already computed.
         """
         p = self.z[..., :3]
+        xp = self.xp
         radius = self.scenario.observation.sensing_radius
         if pair is None:
             pair = uav_pairs(p, radius)
         if self.obstacle_radii.shape[-1] == 0:
-            surface = np.full(p.shape[:2], np.inf)
+            surface = xp.full(p.shape[:2], xp.inf, dtype=p.dtype, device=self.device)
         elif self.obstacles is None:
             centre = topology.obstacle_distances(p, self.scenario.avoidance)
-            surface = np.minimum.reduce(centre - self.obstacle_radii, axis=-1)
+            surface = amin(centre - self.obstacle_radii, axis=-1)
         else:  # padding obstacles are 1e9 m away: never the nearest of a UAV on its route
             centre = topology.obstacle_distances(p, self.obstacles)
-            surface = np.minimum.reduce(centre - self.obstacles.radii[:, None], axis=-1)
+            surface = amin(centre - self.obstacles.radii[:, None], axis=-1)
         return nearest_distance(pair, radius), surface
 
     def pair_distances_of(self, result: StepResult) -> np.ndarray | SensedPairs:

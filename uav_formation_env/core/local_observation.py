@@ -49,6 +49,12 @@ distance matrix (:mod:`~uav_formation_env.core.proximity`): the rules above appl
 UAVs, so the fill and proximity slots stay empty when nobody else is within R, and slot 14 is then
 the clip value. The selection is the same code for both candidate sets (``_select_slots``).
 
+Backends: :func:`build_local_observations` (encoding) takes numpy arrays or torch tensors on any
+device and answers in the same library, with the same slots (ties included: numpy takes a partial
+sort, torch a stable sort); the sensed pairs of the grid are numpy only, so torch takes the
+(B, N, N) distance matrix with the sensing radius instead. The decoding side
+(:func:`decode_local_observations`, :func:`slot_frame`) is numpy only, as the policies that use it.
+
 Defaults: k = 4 because the paper's graph (``config.PAPER_ADJACENCY``) has in-degree at most 4, so
 at N = 5 every other UAV has a slot and nothing of the paper's J_i is lost; the k-nearest formation
 graphs (``formations.k_nearest_adjacency``) also use k = 4 (symmetrising can add in-neighbours, of
@@ -60,12 +66,24 @@ the next one.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.array_api import (
+    asarray_like,
+    clip_in_place,
+    constant_like,
+    device,
+    einsum_in,
+    is_numpy,
+    namespace_of,
+    subtract_into,
+)
 from uav_formation_env.core.cost import anchored
 from uav_formation_env.core.cost.stage import pair_distances
 from uav_formation_env.core.observation import (
@@ -75,6 +93,7 @@ from uav_formation_env.core.observation import (
     FORMATION_SCALE,
     OBSERVATION_BOUND,
     VELOCITY_SCALE,
+    _as_tensor_like,
     observation_dim,
 )
 from uav_formation_env.core.proximity import SensedPairs, pair_distance_between
@@ -84,8 +103,12 @@ TIME_CLIP = 10.0  # clip of the scaled time to the switch (500 s) [-]
 OWN_DIM = 19
 NEIGHBOUR_DIM = 11
 OBSTACLE_DIM = 5
-_TOP = np.uint64(1 << 63)  # group bit of the neighbour sort key (see _neighbour_keys)
-_SELF = np.uint64(np.iinfo(np.uint64).max)
+# int64 sort keys (see _neighbour_keys): in-neighbours have the sign bit set (negative keys),
+# absent candidates the largest key; Python ints, so that they combine with numpy and torch keys
+_NEIGHBOUR = -(1 << 63)
+_SELF = (1 << 63) - 1
+
+Array = Any  # a numpy array or a torch tensor (core/array_api.py)
 
 
 def _check_slots(k: int, m: int, nearest: int = 0) -> None:
@@ -144,16 +167,23 @@ def local_observation_bounds(
     return low.astype(np.float32), high.astype(np.float32)
 
 
-def _take_rows(x: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """``np.take_along_axis(x, index, axis=-1)`` for (..., n) x and (..., j) index, as one flat
-    ``take`` (take_along_axis builds an index grid per call: ~40% of a small build)."""
+def _take_rows(x: Array, index: Array) -> Array:
+    """``take_along_axis(x, index, axis=-1)`` for (..., n) x and (..., j) index, as one flat
+    ``take`` (numpy's take_along_axis builds an index grid per call: ~40% of a small build);
+    numpy or torch (``x.take`` is the flat take on both)."""
     n = x.shape[-1]
-    rows = np.arange(0, x.size, n).reshape(*index.shape[:-1], 1)
-    return np.ravel(x).take(index + rows)
+    if isinstance(x, np.ndarray):  # no device lookup: 0.22 us a call, 18 calls a B = 1 build
+        rows = np.arange(0, x.size, n)
+    else:
+        rows = namespace_of(x).arange(0, math.prod(x.shape), n, device=device(x))
+    return x.reshape((-1,)).take(index + rows.reshape((*index.shape[:-1], 1)))
 
 
-def _k_smallest(key: np.ndarray, k: int) -> np.ndarray:
+def _k_smallest(key: Array, k: int) -> Array:
     """Indices of the k smallest keys along the last axis, ordered by (key, index).
+
+    numpy or torch: torch takes a stable sort (its ``topk`` breaks ties in no documented order);
+    numpy a partial sort with the same result.
 
     Args:
         key: (..., n) sort keys without NaN.
@@ -162,11 +192,13 @@ def _k_smallest(key: np.ndarray, k: int) -> np.ndarray:
     Returns:
         (..., min(k, n)) int64; ties are broken by the lowest index, so results are deterministic.
     """
+    xp = namespace_of(key)
     n = key.shape[-1]
-    if k >= n:
-        return np.argsort(key, axis=-1, kind="stable")
     if k == 0:
-        return np.zeros((*key.shape[:-1], 0), dtype=np.int64)
+        return xp.zeros((*key.shape[:-1], 0), dtype=xp.int64, device=device(key))
+    if k >= n or not is_numpy(xp):
+        # a stable sort orders equal keys by index: the (key, index) order
+        return xp.argsort(key, axis=-1, stable=True)[..., :k]
     # A partial sort (O(n); a full sort costs ~4x at n = 100) puts the k smallest keys first, in
     # any order. That set is exact unless the k-th and (k+1)-th smallest keys are equal: then
     # argpartition may take any of the tied keys, and those rows are redone by _k_smallest_tied.
@@ -183,7 +215,8 @@ def _k_smallest(key: np.ndarray, k: int) -> np.ndarray:
 
 
 def _k_smallest_tied(key: np.ndarray, k: int) -> np.ndarray:
-    """(R, k) the k smallest of (R, n) keys by (key, index), in ascending index, for 0 < k < n."""
+    """(R, k) the k smallest of (R, n) keys by (key, index), in ascending index, for 0 < k < n
+    (numpy only: the partial-sort path of :func:`_k_smallest`)."""
     # every key below the k-th smallest t, then the lowest-index keys equal to t: exactly k a row
     t = np.partition(key, k - 1, axis=-1)[:, k - 1 : k]
     below = key < t
@@ -193,15 +226,15 @@ def _k_smallest_tied(key: np.ndarray, k: int) -> np.ndarray:
     return np.nonzero(chosen)[1].reshape(len(key), k)
 
 
-def _neighbour_keys(
-    distance: np.ndarray, neighbour: np.ndarray, absent: np.ndarray | None
-) -> np.ndarray:
-    """(B, N, C) uint64 sort keys of each receiver's candidates: in-neighbours by distance, then
-    other UAVs, absent candidates (the UAV itself, padding) last.
+def _neighbour_keys(distance: Array, neighbour: Array, absent: Array | None) -> Array:
+    """(B, N, C) int64 sort keys of each receiver's candidates: in-neighbours by distance, then
+    other UAVs, absent candidates (the UAV itself, padding) last (numpy or torch).
 
-    The bits of a non-negative float64 order like its value, so ``bits(d_ij)`` (< 2^63: no sign
-    bit) with the top bit set for non-neighbours is ``d + large (1 - h_ij)`` without rounding:
-    distances never merge, whatever their size. NaN distances count as +inf.
+    The bits of a non-negative float64 order like its value, so ``bits(d_ij)`` (in [0, 2^63): no
+    sign bit) is a key for the non-neighbours and the same bits with the sign bit set (``bits -
+    2^63``, negative) one for the in-neighbours: ``d + large (1 - h_ij)`` without rounding, so
+    distances never merge, whatever their size. NaN distances count as +inf, -0 as +0. (Signed
+    keys since torch sorts no uint64; they order as the unsigned keys with the top bit flipped.)
 
     Args:
         distance: (B, N, C) candidate distances [m].
@@ -209,12 +242,16 @@ def _neighbour_keys(
         absent: (B, N, C) bool, candidates that are no UAV to pick; None: the diagonal of an
             all-pairs (C = N) candidate set.
     """
-    d = np.where(distance >= 0.0, distance, np.inf)
-    bits = d.view(np.uint64)
-    key = np.where(neighbour, bits, bits | _TOP)
+    xp = namespace_of(distance)
+    if distance.dtype != xp.float64:  # the bits below are float64's (widening keeps the order)
+        distance = xp.astype(distance, xp.float64)
+    d = xp.where(distance >= 0.0, distance, xp.inf)
+    d += 0.0  # -0 -> +0 (bits 0); in place: a new (B, N, N) array costs page faults at N = 100
+    bits = d.view(xp.int64)  # a bit view; the method is numpy's and torch's alike
+    key = xp.where(neighbour, bits | _NEIGHBOUR, bits)
     if absent is None:
         batch, n_uav = distance.shape[:2]
-        key.reshape(batch, n_uav * n_uav)[:, :: n_uav + 1] = _SELF  # above every other key
+        key.reshape((batch, n_uav * n_uav))[:, :: n_uav + 1] = _SELF  # above every other key
     else:
         key[absent] = _SELF
     return key
@@ -232,29 +269,40 @@ class _Candidates:
             the diagonal).
     """
 
-    uav: np.ndarray
-    distance: np.ndarray
-    neighbour: np.ndarray
-    absent: np.ndarray | None
+    uav: Array
+    distance: Array
+    neighbour: Array
+    absent: Array | None
 
 
 def _candidates(
-    distance: np.ndarray | SensedPairs,
-    adjacency: np.ndarray,
-    positions: np.ndarray,
+    distance: Array | SensedPairs,
+    adjacency: Array,
+    positions: Array,
     radius: float | None = None,
 ) -> _Candidates:
     """The UAVs a slot can hold: the in-neighbours and the UAVs within the sensing radius (all
-    other UAVs without one), from a distance matrix (O(N) per receiver) or from the sensed
-    pairs (O(1) per receiver)."""
+    other UAVs without one), from a distance matrix (O(N) per receiver; numpy or torch) or from
+    the sensed pairs (O(1) per receiver; numpy only, as the grid of core/proximity.py).
+
+    Raises:
+        TypeError: sensed pairs with torch positions.
+    """
     batch, n_uav = adjacency.shape[:2]
+    xp = namespace_of(positions)
     if not isinstance(distance, SensedPairs):
-        uav = np.broadcast_to(np.arange(n_uav), (batch, n_uav, n_uav))
+        uav = xp.broadcast_to(xp.arange(n_uav, device=device(positions)), (batch, n_uav, n_uav))
         neighbour = adjacency != 0
         if radius is None:
             return _Candidates(uav, distance, neighbour, None)
         # the same candidates as the grid's: unheard UAVs beyond R (and the diagonal) are absent
         return _Candidates(uav, distance, neighbour, ~neighbour & ~(distance <= radius))
+    if not is_numpy(xp):
+        raise TypeError(
+            "build_local_observations: the sensed pairs (core/proximity.SensedPairs, the numpy "
+            "grid) take numpy positions; with torch arrays pass distance as the (B, N, N) "
+            "pair-distance tensor (pair_distances) and sensing_radius"
+        )
     # in-neighbours (communication) and sensed UAVs (within R), each pair once, sorted by
     # receiver then sender
     b, i, j = np.nonzero(adjacency)
@@ -282,25 +330,28 @@ def _candidates(
     )
 
 
-def _select_slots(candidates: _Candidates, k: int, nearest: int) -> np.ndarray:
+def _select_slots(candidates: _Candidates, k: int, nearest: int) -> Array:
     """(B, N, k + nearest) UAV in each slot, -1 where absent: the k smallest neighbour keys (in-
     neighbours by distance, then the nearest others), then the ``nearest`` closest candidates
-    not already taken (proximity slots)."""
+    not already taken (proximity slots). numpy or torch, the same slots."""
     uav, absent = candidates.uav, candidates.absent
+    xp = namespace_of(uav)
+    on = device(uav)
     batch, n_uav, width = uav.shape
-    index = np.full((batch, n_uav, k + nearest), -1, dtype=np.int64)
+    index = xp.full((batch, n_uav, k + nearest), -1, dtype=xp.int64, device=on)
     key = _neighbour_keys(candidates.distance, candidates.neighbour, absent)
     column = _k_smallest(key, k)  # (B, N, min(k, C)); absent columns only after every UAV
     taken = _take_rows(uav, column)
-    index[..., : column.shape[-1]] = np.where(_take_rows(key, column) == _SELF, -1, taken)
+    index[..., : column.shape[-1]] = xp.where(_take_rows(key, column) == _SELF, -1, taken)
     if nearest:
         # the nearest candidates not in a neighbour slot, by distance alone: the ones a
         # collision can come from, whatever the graph (absent and taken ones sort last)
-        near_key = _neighbour_keys(candidates.distance, np.ones(uav.shape, dtype=bool), absent)
-        rows = np.arange(batch * n_uav).reshape(batch, n_uav, 1) * width
-        near_key.reshape(-1)[(rows + column).ravel()] = _SELF
+        everyone = xp.ones(uav.shape, dtype=xp.bool, device=on)
+        near_key = _neighbour_keys(candidates.distance, everyone, absent)
+        rows = xp.arange(batch * n_uav, device=on).reshape((batch, n_uav, 1)) * width
+        near_key.reshape((-1,))[(rows + column).reshape((-1,))] = _SELF  # a view: contiguous
         extra = _k_smallest(near_key, nearest)  # (B, N, min(r, C))
-        found = np.where(_take_rows(near_key, extra) == _SELF, -1, _take_rows(uav, extra))
+        found = xp.where(_take_rows(near_key, extra) == _SELF, -1, _take_rows(uav, extra))
         index[..., k : k + extra.shape[-1]] = found
     return index
 
@@ -315,32 +366,38 @@ class LocalObservations:
             communication metadata (e.g. whose plans to exchange), not part of ``obs``.
     """
 
-    obs: np.ndarray
-    neighbour_index: np.ndarray
+    obs: Array
+    neighbour_index: Array
 
 
 def build_local_observations(
-    z: np.ndarray,
-    reference_velocity: np.ndarray,
-    estimate: np.ndarray,
-    adjacency: np.ndarray,
-    avoiding: np.ndarray,
-    time_fraction: np.ndarray,
-    offsets: np.ndarray,
-    obstacle_centers: np.ndarray,
-    obstacle_radii: np.ndarray,
-    obstacle_present: np.ndarray,
-    min_separation: np.ndarray,
+    z: Array,
+    reference_velocity: Array,
+    estimate: Array,
+    adjacency: Array,
+    avoiding: Array,
+    time_fraction: Array,
+    offsets: Array,
+    obstacle_centers: Array,
+    obstacle_radii: Array,
+    obstacle_present: Array,
+    min_separation: Array,
     k: int = 4,
     m: int = 2,
     mirrored: bool = False,
-    next_velocity: np.ndarray | None = None,
-    time_to_switch: np.ndarray | None = None,
+    next_velocity: Array | None = None,
+    time_to_switch: Array | None = None,
     nearest: int = 2,
-    distance: np.ndarray | SensedPairs | None = None,
+    distance: Array | SensedPairs | None = None,
     sensing_radius: float | None = None,
 ) -> LocalObservations:
-    """Every agent's local observation (length independent of N).
+    """Every agent's local observation (length independent of N), on the array library of ``z``
+    (numpy, or torch on any device).
+
+    With torch ``z``, the mission data (``offsets``, the obstacle arrays, ``time_fraction``,
+    ``next_velocity``, ``time_to_switch``) may be numpy arrays: they are moved to ``z``'s device;
+    ``distance`` must then be the (B, N, N) tensor or None (the sensed pairs are numpy only).
+    Values are computed in ``z``'s dtype (float64 from the sim).
 
     Args:
         z: (B, N, 6) states [m, m/s].
@@ -370,26 +427,48 @@ def build_local_observations(
             slots, as with the sensed pairs; None: every UAV.
 
     Returns:
-        :class:`LocalObservations` with obs (B, N, dim) and neighbour_index (B, N, k + nearest).
+        :class:`LocalObservations` with obs (B, N, dim) float32 and neighbour_index (B, N, k +
+        nearest) int64, of ``z``'s library and device.
+
+    Raises:
+        TypeError: sensed pairs with torch ``z``.
     """
     _check_slots(k, m, nearest)
+    # Methods that numpy and torch share (x.reshape(shape), the flat x.take(index)) rather than
+    # the standard's functions: numpy's function forms dispatch for 1-3 us each (measured).
+    xp = namespace_of(z)
+    numpy = is_numpy(xp)
+    on = device(z)
     batch, n_uav = z.shape[:2]
     slots_count = k + nearest
     scale, low, high = _layout(slots_count, m)
+    if numpy:
+        offsets = np.asarray(offsets, dtype=float)
+        time_fraction = np.asarray(time_fraction)
+        time_to_switch = None if time_to_switch is None else np.asarray(time_to_switch)
+    else:  # the cached layout and the mission data (maybe numpy) on z's device
+        scale, low, high = (constant_like(a, z) for a in (scale, low, high))
+        offsets, obstacle_centers, obstacle_radii, time_fraction = (
+            asarray_like(a, z) for a in (offsets, obstacle_centers, obstacle_radii, time_fraction)
+        )
+        next_velocity, time_to_switch = (
+            None if a is None else asarray_like(a, z) for a in (next_velocity, time_to_switch)
+        )
+        obstacle_present = _as_tensor_like(obstacle_present, z)
     end = OWN_DIM + NEIGHBOUR_DIM * slots_count
     # Raw values into one array, then one division by the slot scales and one clip to the slot
     # bounds (as core.observation): absent slots stay exactly 0.
-    raw = np.empty((batch, n_uav, local_observation_dim(k, m, nearest)))
+    raw = xp.empty((batch, n_uav, local_observation_dim(k, m, nearest)), dtype=z.dtype, device=on)
     v = z[..., 3:]
     raw[..., 0:3] = v
-    np.subtract(v, reference_velocity, out=raw[..., 3:6])
+    subtract_into(raw[..., 3:6], v, reference_velocity)
     raw[..., 6:9] = reference_velocity
     raw[..., 9:12] = estimate
-    raw[..., 12] = np.asarray(time_fraction)[:, None]
+    raw[..., 12] = time_fraction[:, None]
     raw[..., 13] = avoiding
     raw[..., 14] = min_separation
     raw[..., 15:18] = reference_velocity if next_velocity is None else next_velocity[:, None]
-    raw[..., 18] = 0.0 if time_to_switch is None else np.asarray(time_to_switch)[:, None]
+    raw[..., 18] = 0.0 if time_to_switch is None else time_to_switch[:, None]
 
     # neighbour slots, then proximity slots
     if distance is None:
@@ -397,42 +476,44 @@ def build_local_observations(
     candidates = _candidates(distance, adjacency, z[..., :3], sensing_radius)
     neighbour_index = _select_slots(candidates, k, nearest)
     present = neighbour_index >= 0
-    safe = np.where(present, neighbour_index, 0)
-    flat = safe + (np.arange(batch) * n_uav)[:, None, None]  # into the (B·N) flattening
-    a = anchored(z, np.asarray(offsets, dtype=float), mirrored)  # (B, N, 6)
-    slots = raw[..., OWN_DIM:end].reshape(batch, n_uav, slots_count, NEIGHBOUR_DIM)  # a view
+    safe = xp.where(present, neighbour_index, 0)
+    flat = safe + (xp.arange(batch, device=on) * n_uav)[:, None, None]  # into the (B·N) rows
+    a = anchored(z, offsets, mirrored)  # (B, N, 6)
+    # a view: reshape splits raw's contiguous last axis (on both libraries)
+    slots = raw[..., OWN_DIM:end].reshape((batch, n_uav, slots_count, NEIGHBOUR_DIM))
     slots[..., 0] = present
     slots[..., 1] = (_take_rows(adjacency, safe) != 0) & present
-    np.subtract(z[..., :3].reshape(-1, 3)[flat], z[:, :, None, :3], out=slots[..., 2:5])
-    np.subtract(a.reshape(-1, 6)[flat], a[:, :, None], out=slots[..., 5:11])
+    subtract_into(slots[..., 2:5], z[..., :3].reshape((-1, 3))[flat], z[:, :, None, :3])
+    subtract_into(slots[..., 5:11], a.reshape((-1, 6))[flat], a[:, :, None])
     slots[~present] = 0.0
 
     # obstacle slots
     n_obs = obstacle_radii.shape[1]
-    obstacles = raw[..., end:].reshape(batch, n_uav, m, OBSTACLE_DIM)  # a view
-    obstacles[:] = 0.0
+    obstacles = raw[..., end:].reshape((batch, n_uav, m, OBSTACLE_DIM))  # a view
+    obstacles[...] = 0.0
     if n_obs and m:
         # padding may hold any centre (1e12, inf, NaN): zero it before any arithmetic
-        centres = np.where(obstacle_present[..., None], obstacle_centers, 0.0)  # (B, O, 2)
-        radii = np.where(obstacle_present, obstacle_radii, 0.0)[:, None]  # (B, 1, O)
+        centres = xp.where(obstacle_present[..., None], obstacle_centers, 0.0)  # (B, O, 2)
+        radii = xp.where(obstacle_present, obstacle_radii, 0.0)[:, None]  # (B, 1, O)
         rel = centres[:, None] - z[:, :, None, :2]  # (B, N, O, 2)
-        surface = np.sqrt(np.einsum("bnok,bnok->bno", rel, rel)) - radii  # (B, N, O)
+        surface = xp.sqrt(einsum_in(xp, "bnok,bnok->bno", rel, rel)) - radii  # (B, N, O)
         # absent (and non-finite) obstacles sort last and leave their slot absent
-        usable = obstacle_present[:, None] & np.isfinite(surface)
-        order = _k_smallest(np.where(usable, surface, np.inf), m)  # (B, N, min(m, O))
+        usable = obstacle_present[:, None] & xp.isfinite(surface)
+        order = _k_smallest(xp.where(usable, surface, xp.inf), m)  # (B, N, min(m, O))
         used = _take_rows(usable, order)
         taken = obstacles[..., : order.shape[-1], :]
         taken[..., 0] = used
-        pick = order + (np.arange(batch * n_uav) * n_obs).reshape(batch, n_uav, 1)
-        taken[..., 1:3] = rel.reshape(-1, 2)[pick]
-        taken[..., 3] = _take_rows(np.broadcast_to(radii, surface.shape), order)
-        taken[..., 4] = surface.reshape(-1).take(pick)
+        rows = xp.arange(batch * n_uav, device=on) * n_obs
+        pick = order + rows.reshape((batch, n_uav, 1))
+        taken[..., 1:3] = rel.reshape((-1, 2))[pick]
+        taken[..., 3] = _take_rows(xp.broadcast_to(radii, surface.shape), order)
+        taken[..., 4] = surface.reshape((-1,)).take(pick)
         taken[~used] = 0.0
 
     raw /= scale
-    np.maximum(raw, low, out=raw)
-    np.minimum(raw, high, out=raw)
-    return LocalObservations(obs=raw.astype(np.float32), neighbour_index=neighbour_index)
+    clip_in_place(raw, low, high)
+    obs = raw.astype(np.float32) if numpy else xp.astype(raw, xp.float32)
+    return LocalObservations(obs=obs, neighbour_index=neighbour_index)
 
 
 @dataclass(frozen=True)
@@ -471,6 +552,9 @@ def decode_local_observations(
     neighbour_index: np.ndarray | None = None,
 ) -> DecodedLocalObservation:
     """Undo the scaling of :func:`build_local_observations` (the unclipped slots exactly).
+
+    numpy only (the decoding policies are numpy policies): move a torch ``obs`` to the host first
+    (``array_api.to_numpy``).
 
     Neighbour and proximity slots decode alike: the UAV slot arrays have k + nearest entries.
 
@@ -559,7 +643,7 @@ class SlotFrame:
 
 
 def slot_frame(decoded: DecodedLocalObservation) -> SlotFrame:
-    """The :class:`SlotFrame` of decoded local observations (leading dims kept)."""
+    """The :class:`SlotFrame` of decoded local observations (leading dims kept; numpy only)."""
     velocity = decoded.velocity
     own = np.concatenate((np.zeros_like(velocity), velocity), axis=-1)
     present = decoded.slot_present

@@ -1,4 +1,4 @@
-"""Cylinder geometry for obstacle avoidance (docs/model.md §7), pure numpy.
+"""Cylinder geometry for obstacle avoidance (docs/model.md §7), on numpy arrays or torch tensors.
 
 Obstacles are infinite vertical cylinders, so all geometry lives in the horizontal plane: only the
 x and y components of positions are used. The track frame of a copy is (ê, n̂): ê is the
@@ -12,15 +12,30 @@ two tangent lines of the safety circle and not yet abreast of the centre).
 
 Shapes: B scenario copies, O obstacles, N UAVs. :func:`relative_geometry` works batch-last,
 (O, N, B), for speed; :func:`obstacle_distances` returns (B, N, O) as the public API asks.
+
+Every function takes numpy arrays or torch tensors (core/array_api.py) and returns arrays of the
+same library and device; an :class:`ObstacleField` holds arrays of either library
+(:func:`obstacle_field` ``like=``, :func:`field_like`), and a configuration's cached numpy arrays
+are converted to the inputs' device where torch inputs meet them.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from uav_formation_env.config import AvoidanceConfig
+from uav_formation_env.core.array_api import (
+    as_float,
+    constant_like,
+    copy,
+    device,
+    is_numpy,
+    namespace_of,
+    to_numpy,
+)
 from uav_formation_env.core.reference import config_cache
 
 __all__ = [
@@ -29,6 +44,7 @@ __all__ = [
     "choose_sides",
     "deflection_demand",
     "detection_sq",
+    "field_like",
     "heading_frame",
     "in_range",
     "obstacle_arrays",
@@ -52,6 +68,8 @@ class ObstacleField:
     activate, are never the nearest obstacle of a UAV on a route, and are masked in
     observations and metrics.
 
+    The arrays are numpy arrays or torch tensors, all of one library and device.
+
     Attributes:
         centres: (B, O, 2) horizontal centres [m].
         radii: (B, O) [m].
@@ -60,11 +78,11 @@ class ObstacleField:
         present: (B, O) bool, real obstacles.
     """
 
-    centres: np.ndarray
-    radii: np.ndarray
-    r_safe: np.ndarray
-    r_detect: np.ndarray
-    present: np.ndarray
+    centres: Any
+    radii: Any
+    r_safe: Any
+    r_detect: Any
+    present: Any
 
     @property
     def count(self) -> int:
@@ -81,25 +99,54 @@ class ObstacleField:
         self.present[copy] = False
         self.present[copy, :n] = True
         if n:
-            self.centres[copy, :n] = [ob.center for ob in avoidance.obstacles]
-            self.radii[copy, :n] = [ob.radius for ob in avoidance.obstacles]
+            xp, at = namespace_of(self.centres), device(self.centres)
+            centres = [ob.center for ob in avoidance.obstacles]
+            radii = [ob.radius for ob in avoidance.obstacles]
+            self.centres[copy, :n] = xp.asarray(centres, dtype=self.centres.dtype, device=at)
+            self.radii[copy, :n] = xp.asarray(radii, dtype=self.radii.dtype, device=at)
         self.r_safe[copy] = self.radii[copy] + avoidance.safety_margin
         self.r_detect[copy] = self.radii[copy] + avoidance.detection_margin
 
-    def take(self, mask: np.ndarray, source: ObstacleField) -> None:
-        """Copy the ``mask`` copies' rows of ``source`` into this field (in place)."""
-        for name in ("centres", "radii", "r_safe", "r_detect", "present"):
+    def take(self, mask: Any, source: ObstacleField) -> None:
+        """Copy the ``mask`` copies' rows of ``source`` (same library and device) into this field
+        (in place). ``mask``: (B,) bool, numpy or of the field's library."""
+        if not is_numpy(namespace_of(self.centres)):
+            mask = namespace_of(self.centres).asarray(mask, device=device(self.centres))
+        for name in _FIELDS:
             getattr(self, name)[mask] = getattr(source, name)[mask]
 
 
+_FIELDS = ("centres", "radii", "r_safe", "r_detect", "present")
+
+
+def field_like(field: ObstacleField, like: Any) -> ObstacleField:
+    """``field`` with its arrays in the library and on the device of ``like``: to torch, floats in
+    :func:`~uav_formation_env.core.array_api.float_dtype` of ``like``; to numpy, float64. The
+    field itself when it is numpy already and ``like`` is numpy; arrays already right may be
+    shared with ``field``."""
+    if is_numpy(namespace_of(like)):
+        if isinstance(field.centres, np.ndarray):
+            return field
+        return ObstacleField(*(np.array(to_numpy(getattr(field, name))) for name in _FIELDS))
+    xp = namespace_of(like)
+    arrays = {name: as_float(getattr(field, name), like) for name in _FIELDS[:-1]}
+    present = np.array(to_numpy(field.present))  # via the host: any library, any device
+    present = xp.asarray(present, dtype=xp.bool, device=device(like))
+    return ObstacleField(**arrays, present=present)
+
+
 def obstacle_field(
-    avoidances: list[AvoidanceConfig] | tuple[AvoidanceConfig, ...], count: int | None = None
+    avoidances: list[AvoidanceConfig] | tuple[AvoidanceConfig, ...],
+    count: int | None = None,
+    like: Any = None,
 ) -> ObstacleField:
     """The :class:`ObstacleField` of one avoidance configuration per copy.
 
     Args:
         avoidances: B configurations (margins and obstacles of each copy).
         count: O, padded obstacle count (None: the largest count among the copies).
+        like: an array whose library and device the field's arrays get (see
+            :func:`field_like`); None: numpy.
     """
     if count is None:
         count = max((len(a.obstacles) for a in avoidances), default=0)
@@ -113,7 +160,7 @@ def obstacle_field(
     )
     for b, avoidance in enumerate(avoidances):
         field.set_copy(b, avoidance)
-    return field
+    return field if like is None else field_like(field, like)
 
 
 @config_cache
@@ -145,30 +192,29 @@ def detection_sq(avoidance: AvoidanceConfig) -> np.ndarray:
     return squared
 
 
-def heading_frame(velocity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def heading_frame(velocity: Any) -> tuple[Any, Any]:
     """Horizontal track frame (ê, n̂) of a velocity.
 
     Args:
-        velocity: (..., 3) [m/s], normally the preset velocity at the current time.
+        velocity: (..., 3) [m/s], normally the preset velocity at the current time (numpy or
+            torch).
 
     Returns:
         e_hat (..., 2) and n_hat (..., 2) = ê rotated +90° [-]. Where the horizontal speed is zero
         both are zero vectors, so that every λ is 0 and no UAV is in range (no avoidance without a
         horizontal direction of travel).
     """
-    horizontal = np.asarray(velocity, dtype=float)[..., :2]
-    # np.linalg.norm(axis=-1) of real values, without its Python layer
-    speed = np.sqrt(np.add.reduce(horizontal * horizontal, axis=-1, keepdims=True))
-    e_hat = np.where(speed > _EPS, horizontal / np.maximum(speed, _EPS), 0.0)
-    n_hat = np.empty_like(e_hat)
-    np.negative(e_hat[..., 1], out=n_hat[..., 0])
-    n_hat[..., 1] = e_hat[..., 0]
+    horizontal = as_float(velocity)[..., :2]
+    xp = namespace_of(horizontal)
+    # the norm over the last axis of 2: x² + y² is the sum numpy's reduction computes
+    x, y = horizontal[..., :1], horizontal[..., 1:]
+    speed = xp.sqrt(x * x + y * y)
+    e_hat = xp.where(speed > _EPS, horizontal / xp.maximum(speed, _EPS), 0.0)
+    n_hat = xp.concat((-e_hat[..., 1:], e_hat[..., :1]), axis=-1)
     return e_hat, n_hat
 
 
-def relative_geometry(
-    positions: np.ndarray, centres: np.ndarray, e_hat: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def relative_geometry(positions: Any, centres: Any, e_hat: Any) -> tuple[Any, Any, Any, Any, Any]:
     """Position of every UAV relative to every obstacle, in the track frame.
 
     The results are laid out batch-last, (O, N, B), so that reductions over the short UAV and
@@ -176,51 +222,55 @@ def relative_geometry(
     trailing axis).
 
     Args:
-        positions: (B, N, 3) or (B, N, 2) [m].
-        centres: (O, 2) obstacle centres shared by every copy, or (B, O, 2) per copy [m].
+        positions: (B, N, 3) or (B, N, 2) [m], numpy or torch.
+        centres: (O, 2) obstacle centres shared by every copy, or (B, O, 2) per copy [m] (numpy
+            centres are converted to a torch ``positions``' device).
         e_hat: (B, 2) along-track unit vector ê [-]; n̂ = ê rotated +90°.
 
     Returns:
         rel_x, rel_y (O, N, B) = components of p_xy - o [m], dist D (O, N, B) [m],
         lon λ_lon (O, N, B) [m] and lat λ_lat (O, N, B) [m].
     """
+    xp = namespace_of(positions)
+    if not is_numpy(xp):
+        centres = as_float(centres, like=positions)
     # contiguous (N, B) copies: ufunc results inherit their inputs' memory order
-    px = np.ascontiguousarray(positions[:, :, 0].T)
-    py = np.ascontiguousarray(positions[:, :, 1].T)
+    px = copy(positions[:, :, 0].T)
+    py = copy(positions[:, :, 1].T)
     if centres.ndim == 3:  # per copy: (B, O, 2) -> (O, 1, B)
         cx, cy = centres[..., 0].T[:, None, :], centres[..., 1].T[:, None, :]
     else:
         cx, cy = centres[:, 0, None, None], centres[:, 1, None, None]
     rel_x = px[None] - cx
     rel_y = py[None] - cy
-    dist = np.sqrt(rel_x**2 + rel_y**2)
+    dist = xp.sqrt(rel_x**2 + rel_y**2)
     ex, ey = e_hat[:, 0], e_hat[:, 1]
     lon = rel_x * ex + rel_y * ey
     lat = rel_y * ex - rel_x * ey  # n̂ = (-e_y, e_x)
     return rel_x, rel_y, dist, lon, lat
 
 
-def in_range(lon: np.ndarray, lat: np.ndarray, safety_radius: np.ndarray) -> np.ndarray:
+def in_range(lon: Any, lat: Any, safety_radius: Any) -> Any:
     """The "within the obstacle range" test: |λ_lat| < R_s and λ_lon < 0.
 
     Args:
         lon: (...) along-track coordinate λ_lon [m].
         lat: (...) lateral coordinate λ_lat [m].
-        safety_radius: R_s, broadcastable to ``lon`` [m].
+        safety_radius: R_s, broadcastable to ``lon`` [m] (the library of ``lon``).
 
     Returns:
         (...) bool.
     """
-    return (np.abs(lat) < safety_radius) & (lon < 0.0)
+    return (namespace_of(lat).abs(lat) < safety_radius) & (lon < 0.0)
 
 
 def tangent_direction(
-    rel_x: np.ndarray,
-    rel_y: np.ndarray,
-    dist: np.ndarray,
-    safety_radius: np.ndarray,
-    side: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
+    rel_x: Any,
+    rel_y: Any,
+    dist: Any,
+    safety_radius: Any,
+    side: Any,
+) -> tuple[Any, Any]:
     """Unit direction l/||l|| of the guide's avoidance reference.
 
     Outside the safety circle (D > R_s), l is the tangent from the guide to the circle on the
@@ -236,55 +286,57 @@ def tangent_direction(
         rel_y: (...) y of p - o [m].
         dist: (...) D = ||p_xy - o|| [m].
         safety_radius: (...) R_s [m].
-        side: (...) group side s, +1 or -1 [-].
+        side: (...) group side s, +1 or -1 [-] (numpy is converted to a torch ``dist``'s device).
+        (All numpy or torch; the safety radius may be a Python or numpy scalar.)
 
     Returns:
         x and y components (...) of the unit vector [-].
     """
+    xp = namespace_of(dist)
     valid = dist > _EPS
-    safe_dist = np.where(valid, dist, 1.0)
-    rx = np.where(valid, rel_x / safe_dist, 1.0)
-    ry = np.where(valid, rel_y / safe_dist, 0.0)
-    s = np.asarray(side, dtype=float)
+    safe_dist = xp.where(valid, dist, 1.0)
+    rx = xp.where(valid, rel_x / safe_dist, 1.0)
+    ry = xp.where(valid, rel_y / safe_dist, 0.0)
+    s = as_float(side, like=dist)
     # outside: Rot(s α)(-r̂), with sin α = R_s/D and cos α = sqrt(1 - sin² α), no trigonometry
-    sin_alpha = np.minimum(safety_radius / safe_dist, 1.0)
-    ca = np.sqrt(1.0 - sin_alpha**2)
+    sin_alpha = xp.minimum(safety_radius / safe_dist, 1.0)
+    ca = xp.sqrt(1.0 - sin_alpha**2)
     sa = s * sin_alpha
     out_x = sa * ry - ca * rx
     out_y = -sa * rx - ca * ry
     # inside: Rot(-s 90°) r̂ = s (r_y, -r_x), plus the outward radial term
-    push = np.minimum(np.maximum((safety_radius - dist) / safety_radius, 0.0), 1.0)  # np.clip
+    push = xp.minimum(xp.maximum((safety_radius - dist) / safety_radius, 0.0), 1.0)  # np.clip
     in_x = s * ry + push * rx
     in_y = push * ry - s * rx
     outside = dist > safety_radius
-    lx = np.where(outside, out_x, in_x)
-    ly = np.where(outside, out_y, in_y)
-    norm = np.maximum(np.sqrt(lx**2 + ly**2), _EPS)
+    lx = xp.where(outside, out_x, in_x)
+    ly = xp.where(outside, out_y, in_y)
+    norm = xp.maximum(xp.sqrt(lx**2 + ly**2), _EPS)
     return lx / norm, ly / norm
 
 
-def obstacle_distances(
-    positions: np.ndarray, avoidance: AvoidanceConfig | ObstacleField
-) -> np.ndarray:
+def obstacle_distances(positions: Any, avoidance: AvoidanceConfig | ObstacleField) -> Any:
     """Horizontal distance from each UAV to each obstacle centre.
 
     Args:
-        positions: (B, N, 3) [m].
+        positions: (B, N, 3) [m], numpy or torch (a field's arrays: the same library).
         avoidance: the obstacles of a configuration (shared by every copy), or a per-copy field.
 
     Returns:
-        (B, N, O) [m].
+        (B, N, O) [m], in the library of ``positions``.
     """
     if isinstance(avoidance, ObstacleField):
+        positions = as_float(positions, like=avoidance.centres)
         centres = avoidance.centres[:, None]  # (B, 1, O, 2)
     else:
-        centres = obstacle_arrays(avoidance)[0]
-    positions = np.asarray(positions, dtype=float)
-    rel_sq = np.square(positions[..., :, None, :2] - centres)
-    return np.sqrt(rel_sq[..., 0] + rel_sq[..., 1])
+        positions = as_float(positions)
+        centres = constant_like(obstacle_arrays(avoidance)[0], positions)
+    xp = namespace_of(positions)
+    rel_sq = xp.square(positions[..., :, None, :2] - centres)
+    return xp.sqrt(rel_sq[..., 0] + rel_sq[..., 1])
 
 
-def choose_sides(lat: np.ndarray, deadband: float) -> tuple[np.ndarray, np.ndarray]:
+def choose_sides(lat: Any, deadband: float) -> tuple[Any, Any]:
     """Each UAV's side of an obstacle's centre line at activation, and whether that is case 1.
 
     docs/model.md §7's rule is the sign of λ_lat. A UAV within ``deadband`` of the centre line has
@@ -294,39 +346,44 @@ def choose_sides(lat: np.ndarray, deadband: float) -> tuple[np.ndarray, np.ndarr
     (docs/deviations.md §6). ``deadband = 0`` is the rule of docs/model.md exactly.
 
     Args:
-        lat: (O, N, B) lateral coordinates λ_lat [m].
+        lat: (O, N, B) lateral coordinates λ_lat [m], numpy or torch.
         deadband: half-width of the band around the centre line [m].
 
     Returns:
         ``(side, one_group)``: (O, N, B) int8 sides ±1 and (O, B) bool case 1.
     """
-    strict = np.where(lat >= 0.0, 1, -1).astype(np.int8)
+    xp = namespace_of(lat)
+    strict = xp.astype(xp.where(lat >= 0.0, 1, -1), xp.int8)
     fits_plus = (lat >= -deadband).all(axis=1)  # (O, B): everyone counts as side +1
     fits_minus = (lat < deadband).all(axis=1)
     one_group = fits_plus | fits_minus
     # If both fit (the whole formation is within the band) the mean position decides.
-    whole_side = np.where(fits_plus & (~fits_minus | (lat.mean(axis=1) >= 0.0)), 1, -1)
-    side = np.where(one_group[:, None], whole_side[:, None].astype(np.int8), strict)
-    return side.astype(np.int8), one_group
+    whole_side = xp.where(fits_plus & (~fits_minus | (lat.mean(axis=1) >= 0.0)), 1, -1)
+    side = xp.where(one_group[:, None], xp.astype(whole_side[:, None], xp.int8), strict)
+    return side, one_group  # int8 (where of two int8 arrays), a new array
 
 
 def deflection_demand(
-    rel_x: np.ndarray,
-    rel_y: np.ndarray,
-    dist: np.ndarray,
-    r_safe: np.ndarray,
-    e_hat: np.ndarray,
-    slot_sides: np.ndarray,
-) -> np.ndarray:
+    rel_x: Any,
+    rel_y: Any,
+    dist: Any,
+    r_safe: Any,
+    e_hat: Any,
+    slot_sides: Any,
+) -> Any:
     """Turn each UAV would need to clear the safety circle on each group side.
 
     Returns the signed angle from ê to the UAV's own tangent direction, positive towards the side
     of each group slot (``slot_sides``, e.g. (+1, -1)), shape (O, 2, N, B) [rad]. The group's
     guide is the in-range member with the largest value: the one the group must follow for every
-    member to clear. ``r_safe`` is (O,) shared or (O, 1, B) per copy [m].
+    member to clear. ``r_safe`` is (O,) shared or (O, 1, B) per copy [m]. numpy or torch (numpy
+    ``slot_sides`` and ``r_safe`` are converted to a torch ``dist``'s device).
     """
-    sides = np.asarray(slot_sides)[None, :, None, None].astype(float)
+    xp = namespace_of(dist)
+    sides = as_float(slot_sides, like=dist)[None, :, None, None]
+    if not is_numpy(xp):
+        r_safe = as_float(r_safe, like=dist)
     r_safe = r_safe[:, None] if r_safe.ndim == 3 else r_safe[:, None, None, None]
     lx, ly = tangent_direction(rel_x[:, None], rel_y[:, None], dist[:, None], r_safe, sides)
     ex, ey = e_hat[:, 0], e_hat[:, 1]
-    return np.arctan2(sides * (ex * ly - ey * lx), ex * lx + ey * ly)
+    return xp.atan2(sides * (ex * ly - ey * lx), ex * lx + ey * ly)

@@ -7,18 +7,32 @@ A schedule is either one :class:`~uav_formation_env.config.ScheduleConfig` share
 or a :class:`CopySchedules` with one (drawn) schedule per copy (scene distributions with
 ``scene.route``). Every function here takes both; with :class:`CopySchedules` the times ``t``
 carry the copy axis first, (B, ...).
+
+The functions take numpy arrays or torch tensors (core/array_api.py): ``t``, the other array
+arguments and a :class:`CopySchedules`' arrays; a shared :class:`ScheduleConfig`'s cached numpy
+arrays are converted (once, cached) to the inputs' library and device.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache, wraps
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
 from uav_formation_env.config import ScheduleConfig
+from uav_formation_env.core.array_api import (
+    as_float,
+    constant_like,
+    device,
+    is_numpy,
+    namespace,
+    namespace_of,
+    take,
+)
 
 __all__ = [
     "CopySchedules",
@@ -87,27 +101,37 @@ class CopySchedules:
     velocity: the padding legs have zero length and every rule of eq. 23 is unchanged.
 
     Attributes:
-        times: (B, K) switching times [s], non-decreasing along K.
-        velocities: (B, K+1, 3) leg velocities [m/s].
+        times: (B, K) switching times [s], non-decreasing along K (numpy or torch).
+        velocities: (B, K+1, 3) leg velocities [m/s] (the same library and device as ``times``).
     """
 
-    times: np.ndarray
-    velocities: np.ndarray
+    times: Any
+    velocities: Any
 
     @property
     def batch(self) -> int:
         return self.times.shape[0]
 
+    def set_copy(self, copy: int, schedule: ScheduleConfig) -> None:
+        """Write copy ``copy``'s row (in place) from a schedule, padded as :func:`copy_schedules`
+        pads (on either backend)."""
+        row = copy_schedules([schedule], self.velocities.shape[1], like=self.times)
+        self.times[copy], self.velocities[copy] = row.times[0], row.velocities[0]
+
 
 Schedule = ScheduleConfig | CopySchedules
 
 
-def copy_schedules(schedules: Sequence[ScheduleConfig], legs: int | None = None) -> CopySchedules:
+def copy_schedules(
+    schedules: Sequence[ScheduleConfig], legs: int | None = None, like: Any = None
+) -> CopySchedules:
     """Stack per-copy schedules (see :class:`CopySchedules`).
 
     Args:
         schedules: B schedules.
         legs: pad to this many legs (K + 1); default: the most legs of ``schedules``.
+        like: an array whose library and device (and float dtype, see
+            :func:`~uav_formation_env.core.array_api.float_dtype`) the arrays get; None: numpy.
     """
     most = max(len(s.velocities) for s in schedules)
     legs = most if legs is None else legs
@@ -119,37 +143,56 @@ def copy_schedules(schedules: Sequence[ScheduleConfig], legs: int | None = None)
         t, v = schedule_arrays(schedule)
         times[b, : len(t)], times[b, len(t) :] = t, t[-1] if len(t) else 0.0
         velocities[b, : len(v)], velocities[b, len(v) :] = v, v[-1]
+    if like is not None and not is_numpy(namespace_of(like)):
+        times, velocities = as_float(times, like), as_float(velocities, like)
     return CopySchedules(times, velocities)
 
 
-def _leg(schedule: Schedule, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _times(schedule: Schedule, t: Any) -> Any:
+    """``t`` as a float array of the library and device of ``t`` or of a per-copy schedule."""
+    return as_float(t, like=None if isinstance(schedule, ScheduleConfig) else schedule.times)
+
+
+def _leg(schedule: Schedule, t: Any) -> tuple[Any, Any, Any]:
     """The leg index of eq. 23 at t (the number of switching times before t - tol), with the
     schedule's times and velocities broadcast against t.
+
+    Args:
+        schedule: shared or per copy.
+        t: (...) float time [s], already converted by :func:`_times`.
 
     Returns:
         ``(index, times, velocities)``: (...) int; (..., K) [s]; (..., K+1, 3) [m/s].
     """
-    t = np.asarray(t, dtype=float)
     if isinstance(schedule, ScheduleConfig):
         times, velocities = schedule_arrays(schedule)
-        return times.searchsorted(t - _TIME_TOL, side="left"), times, velocities
+        if isinstance(t, np.ndarray):
+            return times.searchsorted(t - _TIME_TOL, side="left"), times, velocities
+        times, velocities = constant_like(times, t), constant_like(velocities, t)
+        return namespace_of(t).searchsorted(times, t - _TIME_TOL, side="left"), times, velocities
     if t.ndim == 0 or t.shape[0] != schedule.batch:
         raise ValueError(
-            f"t must have the copy axis first, (B={schedule.batch}, ...), got shape {t.shape}"
+            f"t must have the copy axis first, (B={schedule.batch}, ...), got shape "
+            f"{tuple(t.shape)}"
         )
+    times, velocities = schedule.times, schedule.velocities
+    if not isinstance(t, np.ndarray):  # torch t: a numpy schedule moves to its device
+        times, velocities = as_float(times, like=t), as_float(velocities, like=t)
     lead = (schedule.batch,) + (1,) * (t.ndim - 1)
-    times = schedule.times.reshape(*lead, -1)
-    velocities = schedule.velocities.reshape(*lead, -1, 3)
-    index = (times < (t - _TIME_TOL)[..., None]).sum(axis=-1)  # searchsorted(side="left")
+    times = times.reshape(*lead, -1)
+    velocities = velocities.reshape(*lead, -1, 3)
+    # searchsorted(side="left") per copy
+    index = (times < (t - _TIME_TOL)[..., None]).sum(axis=-1)
     return index, times, velocities
 
 
-def _take_leg(velocities: np.ndarray, index: np.ndarray) -> np.ndarray:
+def _take_leg(velocities: Any, index: Any) -> Any:
     """velocities[..., index, :] per element: (K+1, 3) or (..., K+1, 3) -> (..., 3)."""
     if velocities.ndim == 2:
-        return velocities.take(index, axis=0)  # a new array even for scalar t
-    velocities = np.broadcast_to(velocities, (*index.shape, *velocities.shape[-2:]))
-    return np.take_along_axis(velocities, index[..., None, None], axis=-2)[..., 0, :]
+        return take(velocities, index, axis=0)  # a new array even for scalar t
+    xp = namespace_of(velocities)
+    velocities = xp.broadcast_to(velocities, (*index.shape, *velocities.shape[-2:]))
+    return xp.take_along_axis(velocities, index[..., None, None], axis=-2)[..., 0, :]
 
 
 def preset_velocity(schedule: Schedule, t: np.ndarray) -> np.ndarray:
@@ -160,11 +203,12 @@ def preset_velocity(schedule: Schedule, t: np.ndarray) -> np.ndarray:
 
     Args:
         schedule: switching times and velocities (per copy: ``t`` is (B, ...)).
-        t: (...) time [s].
+        t: (...) time [s], numpy or torch.
 
     Returns:
-        (..., 3) velocity [m/s].
+        (..., 3) velocity [m/s], in the library (and on the device) of ``t`` / the schedule.
     """
+    t = as_float(t, like=None if isinstance(schedule, ScheduleConfig) else schedule.times)
     index, _, velocities = _leg(schedule, t)
     return _take_leg(velocities, index)
 
@@ -175,24 +219,26 @@ def next_leg(schedule: Schedule, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]
 
     Args:
         schedule: switching times and velocities (per copy: ``t`` is (B, ...)).
-        t: (...) time [s].
+        t: (...) time [s], numpy or torch.
 
     Returns:
         ``(velocity, wait)``: (..., 3) [m/s] and (...) [s]; on the last leg, its own velocity and
         0 s.
     """
-    t = np.asarray(t, dtype=float)
+    t = _times(schedule, t)
+    xp = namespace_of(t)
     index, times, velocities = _leg(schedule, t)  # index: the current leg
     last = times.shape[-1]  # index of the last leg
     if last == 0:
-        return _take_leg(velocities, index), np.zeros(t.shape)
+        return _take_leg(velocities, index), xp.zeros(t.shape, dtype=t.dtype, device=device(t))
     if times.ndim == 1:
-        switch_time = times.take(np.minimum(index, last - 1))
+        switch_time = take(times, xp.minimum(index, last - 1))
     else:
-        times = np.broadcast_to(times, (*index.shape, last))
-        switch_time = np.take_along_axis(times, np.minimum(index, last - 1)[..., None], -1)[..., 0]
-    switch = np.where(index < last, switch_time, t)
-    return _take_leg(velocities, np.minimum(index + 1, last)), np.maximum(switch - t, 0.0)
+        times = xp.broadcast_to(times, (*index.shape, last))
+        switch_time = xp.take_along_axis(times, xp.minimum(index, last - 1)[..., None], axis=-1)
+        switch_time = switch_time[..., 0]
+    switch = xp.where(index < last, switch_time, t)
+    return _take_leg(velocities, xp.minimum(index + 1, last)), xp.maximum(switch - t, 0.0)
 
 
 def preset_displacement(schedule: Schedule, t: np.ndarray) -> np.ndarray:
@@ -204,18 +250,20 @@ def preset_displacement(schedule: Schedule, t: np.ndarray) -> np.ndarray:
 
     Args:
         schedule: switching times and velocities (per copy: ``t`` is (B, ...)).
-        t: (...) time [s], >= 0.
+        t: (...) time [s], >= 0, numpy or torch.
 
     Returns:
         (..., 3) displacement [m].
     """
+    t = _times(schedule, t)
+    xp = namespace_of(t)
     _, times, velocities = _leg(schedule, t)
-    t = np.asarray(t, dtype=float)[..., None]  # (..., 1)
-    edges = np.maximum(times, 0.0)
-    zero = np.zeros((*edges.shape[:-1], 1))
-    start = np.concatenate((zero, edges), axis=-1)  # (..., K+1) leg k starts
-    end = np.concatenate((edges, zero + np.inf), axis=-1)  # (..., K+1) and ends
-    covered = np.clip(t, start, end) - start  # (..., K+1) [s]
+    t = t[..., None]  # (..., 1)
+    edges = xp.maximum(times, 0.0)
+    zero = xp.zeros((*edges.shape[:-1], 1), dtype=edges.dtype, device=device(edges))
+    start = xp.concat((zero, edges), axis=-1)  # (..., K+1) leg k starts
+    end = xp.concat((edges, zero + math.inf), axis=-1)  # (..., K+1) and ends
+    covered = xp.clip(t, start, end) - start  # (..., K+1) [s]
     if velocities.ndim == 2:
         return covered @ velocities
     return (covered[..., None] * velocities).sum(axis=-2)
@@ -232,15 +280,19 @@ def route_error(
     Args:
         schedule: the preset velocity (per copy: ``t`` is (B, ...)).
         t: (...) time [s], broadcastable against the leading axes of ``centroid``.
-        centroid: (..., 3) formation centroid [m].
+        centroid: (..., 3) formation centroid [m] (numpy or torch, like the other arrays).
         start: (..., 3) centroid at t = 0 [m].
 
     Returns:
         (...) [m].
     """
+    xp = namespace(centroid, start, t)
+    if not is_numpy(xp):  # the times follow the positions' library and device
+        t = as_float(t, like=centroid if is_numpy(namespace_of(t)) else t)
+        start = as_float(start, like=centroid)
     route = start + preset_displacement(schedule, t)
     offset = (centroid - route)[..., :2]
-    return np.sqrt((offset**2).sum(axis=-1))
+    return xp.sqrt((offset**2).sum(axis=-1))
 
 
 def reference_preview(
@@ -258,6 +310,7 @@ def reference_preview(
         schedule: preset velocity (eq. 23), shared or per copy.
         t: (B,) or scalar current time [s].
         dt: control step δ [s].
+        (The arrays are numpy or torch; the result is in ``reference_now``'s library.)
         horizon: H, number of steps; k = 0..H.
         reference_now: (B, N, 3) current reference (``TopologyOutput.reference_velocity``) [m/s].
         avoiding: (B, N) bool, UAVs that hold ``reference_now`` for every k.
@@ -268,12 +321,15 @@ def reference_preview(
         (B, N, H+1, 3) [m/s]: the schedule at t + k·dt (plus the correction), except avoiding
         UAVs, which hold ``reference_now``.
     """
-    reference_now = np.asarray(reference_now, dtype=float)
+    reference_now = as_float(reference_now)
+    xp = namespace_of(reference_now)
     batch = reference_now.shape[0]
-    t = np.broadcast_to(np.asarray(t, dtype=float), (batch,))
-    times = t[:, None] + dt * np.arange(horizon + 1)  # (B, H+1)
+    t = xp.broadcast_to(as_float(t, like=reference_now), (batch,))
+    # float steps k: dt * k is the same double as numpy's dt * (int k)
+    steps = xp.arange(horizon + 1, dtype=t.dtype, device=device(t))
+    times = t[:, None] + dt * steps  # (B, H+1)
     schedule_part = preset_velocity(schedule, times)[:, None]  # (B, 1, H+1, 3)
     if correction is not None:
-        schedule_part = schedule_part + correction[:, None, None, :]
-    hold = np.asarray(avoiding, dtype=bool)[:, :, None, None]
-    return np.where(hold, reference_now[:, :, None, :], schedule_part)
+        schedule_part = schedule_part + as_float(correction, like=reference_now)[:, None, None, :]
+    hold = xp.asarray(avoiding, dtype=xp.bool, device=device(reference_now))[:, :, None, None]
+    return xp.where(hold, reference_now[:, :, None, :], schedule_part)

@@ -1,4 +1,5 @@
-"""Environment views of the scenario: PettingZoo parallel and AEC, Gymnasium, SB3 VecEnv."""
+"""Environment views of the scenario: PettingZoo parallel and AEC, Gymnasium, SB3 VecEnv,
+TorchRL EnvBase (torch backend)."""
 
 from __future__ import annotations
 
@@ -78,11 +79,43 @@ def vec_env(
     return FormationVecEnv(resolve_with_overrides(scenario, overrides), num_copies)
 
 
+def torchrl_env(
+    scenario: str | Path | Scenario | Mapping[str, Any] = "paper",
+    num_envs: int = 1,
+    device: Any = "cpu",
+    seed: int | None = None,
+    return_state: bool = True,
+    n_uav: int | None = None,
+    **overrides: Any,
+):
+    """A batched TorchRL ``EnvBase`` of ``num_envs`` copies on the torch backend (CPU or CUDA):
+    :class:`~uav_formation_env.envs.torchrl_adapter.FormationTorchRLEnv`.
+
+    Imports torchrl lazily (the ``[torchrl]`` extra).
+
+    Args:
+        num_envs: B, an integer >= 1.
+        device: torch device of the simulation and of every tensor.
+        seed: seed of the first reset.
+        return_state: add the global state for centralised critics.
+        n_uav: N of a scenario that draws N per reset.
+        **overrides: scenario fields, as for :func:`parallel_env`.
+    """
+    if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
+        raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+    require("torchrl", "torchrl_env (a TorchRL EnvBase)")
+    from uav_formation_env.envs.torchrl_adapter import FormationTorchRLEnv
+
+    resolved = resolve_with_overrides(scenario, overrides)
+    return FormationTorchRLEnv(resolved, int(num_envs), device, seed, return_state, n_uav)
+
+
 __all__ = [
     "UAVFormationAECEnv",
     "UAVFormationParallelEnv",
     "env",
     "parallel_env",
     "resolve_with_overrides",
+    "torchrl_env",
     "vec_env",
 ]
