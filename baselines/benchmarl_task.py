@@ -33,6 +33,11 @@ by default: ``log1p`` reward with J_0 = 100, divergence truncation (100 m format
 BenchMARL's hydra command line (``python benchmarl/run.py task=...``) only knows the tasks whose
 YAML ships inside benchmarl; use the Python API above (``examples/benchmarl_mappo.py`` is a
 runnable script). Needs the ``[benchmarl]`` extra (benchmarl, torchrl, torch).
+
+``backend="torch"`` (a task option) skips PettingZoo: the task's env is then the batched
+:class:`~uav_formation_env.envs.torchrl_adapter.FormationTorchRLEnv` of ``num_envs`` copies on
+BenchMARL's sampling device (the simulator, cost and observations as torch tensors, the same
+numbers as numpy), which BenchMARL uses as a vectorised env (no SerialEnv of single copies).
 """
 
 from __future__ import annotations
@@ -49,7 +54,7 @@ from torchrl.envs import EnvBase
 from torchrl.envs.libs.pettingzoo import PettingZooWrapper
 
 from uav_formation_env import parallel_env
-from uav_formation_env.envs import resolve_with_overrides
+from uav_formation_env.envs import resolve_with_overrides, torchrl_env
 
 __all__ = [
     "ENV_NAME",
@@ -60,6 +65,7 @@ __all__ = [
 ]
 
 ENV_NAME = "uav_formation"
+BACKENDS = ("pettingzoo", "torch")  # the task's env: one PettingZoo copy, or batched torch
 
 
 @dataclass
@@ -74,6 +80,8 @@ class UavFormationTaskConfig:
         duration: episode length [s]; None keeps the scenario's (200 s, 1000 steps, for the paper).
         overrides: any other scenario fields, as ``{"observer.enabled": False}``.
         return_state: expose the global state ``state()`` (for centralised critics).
+        backend: ``"pettingzoo"`` (TorchRL's PettingZooWrapper of one copy, BenchMARL stacks
+            copies) or ``"torch"`` (the batched torch-backend env, vectorised on the device).
     """
 
     scenario: str = "paper"
@@ -85,6 +93,11 @@ class UavFormationTaskConfig:
     duration: float | None = None
     overrides: dict[str, Any] = field(default_factory=dict)
     return_state: bool = True
+    backend: str = "pettingzoo"
+
+    def __post_init__(self) -> None:
+        if self.backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {self.backend!r}")
 
     def scenario_overrides(self) -> dict[str, Any]:
         """The env overrides of this config (as for ``parallel_env(scenario, **overrides)``)."""
@@ -138,10 +151,18 @@ class UavFormationTaskClass(TaskClass):
         seed: int | None,
         device: DEVICE_TYPING,
     ) -> Callable[[], EnvBase]:
-        # Not vectorised: BenchMARL stacks num_envs copies in a SerialEnv / ParallelEnv.
         settings = copy.deepcopy(self.settings)
         scenario = self._scenario
+        if settings.backend == "torch":  # vectorised: num_envs copies in one torch env
 
+            def make_torch_env() -> EnvBase:
+                return torchrl_env(
+                    scenario, num_envs, device, seed, return_state=settings.return_state
+                )
+
+            return make_torch_env
+
+        # Not vectorised: BenchMARL stacks num_envs copies in a SerialEnv / ParallelEnv.
         def make_env() -> EnvBase:
             return PettingZooWrapper(
                 env=parallel_env(scenario),
@@ -168,8 +189,9 @@ class UavFormationTaskClass(TaskClass):
         return env.group_map
 
     def _group_keys(self, env: EnvBase, keep: str) -> Composite | None:
-        """The observation spec with only ``(group, keep)`` per group (no state)."""
-        spec = env.observation_spec.clone()
+        """The observation spec with only ``(group, keep)`` per group (no state), unbatched (as
+        BenchMARL builds its models: a vectorised torch env's spec without the copy axis)."""
+        spec = env.full_observation_spec_unbatched.clone()
         for group in self.group_map(env):
             group_spec = spec[group]
             for key in list(group_spec.keys()):
@@ -188,15 +210,16 @@ class UavFormationTaskClass(TaskClass):
         return self._group_keys(env, "info")
 
     def state_spec(self, env: EnvBase) -> Composite | None:
-        if "state" in env.observation_spec:
-            return Composite({"state": env.observation_spec["state"].clone()})
+        spec = env.full_observation_spec_unbatched
+        if "state" in spec:
+            return Composite({"state": spec["state"].clone()})
         return None
 
     def action_mask_spec(self, env: EnvBase) -> Composite | None:
         return None  # every UAV acts at every step
 
     def action_spec(self, env: EnvBase) -> Composite:
-        return env.full_action_spec
+        return env.full_action_spec_unbatched
 
     @staticmethod
     def env_name() -> str:

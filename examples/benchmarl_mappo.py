@@ -47,7 +47,7 @@ def make_experiment(args: argparse.Namespace, out: Path) -> Experiment:
     config.checkpoint_at_end = False
     config.save_folder = str(out)
 
-    task_options: dict[str, Any] = {}
+    task_options: dict[str, Any] = {"backend": args.backend}
     if args.duration is not None:
         task_options["duration"] = args.duration
     if args.scenario.endswith((".yaml", ".yml")):
@@ -110,6 +110,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--hidden", type=int, default=256)
     parser.add_argument("--duration", type=float, default=None, help="episode length [s]")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--backend",
+        choices=("pettingzoo", "torch"),
+        default="pettingzoo",
+        help="the task's env: PettingZoo copies, or one batched torch env (CPU or GPU)",
+    )
     parser.add_argument("--loggers", nargs="*", default=[], help="e.g. csv tensorboard")
     parser.add_argument("--out", default=None, help="experiment folder (default: a temp dir)")
     parser.add_argument(

@@ -126,13 +126,36 @@ def test_benchmarl_task_class() -> None:
         UavFormationTask.PAPER.get_task({"reward": "weird"})
 
 
-def test_benchmarl_mappo_example() -> None:
+@pytest.mark.parametrize("backend", ["pettingzoo", "torch"])
+def test_benchmarl_mappo_example(backend: str) -> None:
     example = load_example("benchmarl_mappo", "benchmarl")
-    result = example.main(["--quick"])  # 1 iteration of 200 frames, 100-step episodes
+    # 1 iteration of 200 frames, 100-step episodes
+    result = example.main(["--quick", "--backend", backend])
     assert result["iterations"] == 1
     assert result["finite"] and result["mean_return"] < 0
     assert abs(result["mean_return"]) <= MAX_STEP_REWARD * 100
     assert result["parameters_changed"]
+
+
+def test_benchmarl_torch_backend_task() -> None:
+    """The torch backend's env is vectorised (BenchMARL uses it as it is) with the same specs."""
+    pytest.importorskip("benchmarl")
+    from uav_formation_baselines.benchmarl_task import UavFormationTask
+
+    task = UavFormationTask.N3.get_task({"duration": 4.0, "backend": "torch"})
+    env = task.get_env_fun(num_envs=4, continuous_actions=True, seed=0, device="cpu")()
+    assert env.batch_size == (4,)
+    assert task.group_map(env) == {"uav": ["uav_0", "uav_1", "uav_2"]}
+    # BenchMARL builds its models from the unbatched specs
+    assert task.observation_spec(env)["uav", "observation"].shape == (3, 33)
+    assert task.action_spec(env)["uav", "action"].shape == (3, 3)
+    assert task.state_spec(env)["state"].shape == (12 * 3 + 1 + 9,)
+    assert "J" in task.info_spec(env)["uav", "info"]
+    rollout = env.rollout(20)
+    assert bool(rollout["next", "done"][:, -1].all())
+    assert rollout["next", "uav", "reward"].abs().max() < MAX_STEP_REWARD
+    with pytest.raises(ValueError, match="backend must be one of"):
+        UavFormationTask.N3.get_task({"backend": "jax"})
 
 
 # ---------------------------------------------------------------------------------- CleanRL
