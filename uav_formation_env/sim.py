@@ -32,7 +32,13 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core import topology
-from uav_formation_env.core.array_api import amin, backend_device, namespace_of_backend
+from uav_formation_env.core.array_api import (
+    amin,
+    backend_device,
+    namespace,
+    namespace_of_backend,
+    to_numpy,
+)
 from uav_formation_env.core.array_api import copy as copy_array
 from uav_formation_env.core.cost import CostTerms, stage_cost
 from uav_formation_env.core.disturbances import CopyDisturbance, Disturbance
@@ -95,7 +101,7 @@ def _seeds_for(seed: SeedLike, count: int) -> list[int | None]:
 def _where_batch(mask, new, old):
     """Fieldwise ``where(mask)`` over the leading batch axis of two dataclasses of arrays (numpy
     or torch; ``mask`` (B,) bool of the same library)."""
-    xp = namespace_of_backend("numpy" if isinstance(mask, np.ndarray) else "torch")
+    xp = namespace(mask)
     out = {}
     for f in fields(old):
         a, b = getattr(new, f.name), getattr(old, f.name)
@@ -109,8 +115,8 @@ def _where_batch(mask, new, old):
 
 def _host(values, dtype) -> np.ndarray:
     """A mask or index array given as numpy, a list or a torch tensor, as a numpy array."""
-    if not isinstance(values, np.ndarray | list | tuple) and hasattr(values, "cpu"):
-        values = values.cpu().numpy()
+    if not isinstance(values, np.ndarray | list | tuple):
+        values = to_numpy(values)
     return np.asarray(values, dtype=dtype)
 
 
@@ -321,9 +327,7 @@ class FormationSim:
         self.obstacles.set_copy(copy, scene.avoidance)
         self.copy_disturbance.set_copy(copy, scene.disturbance)
         if isinstance(self.schedule, CopySchedules):
-            row = copy_schedules([scene.schedule], self.schedule.velocities.shape[1])
-            self.schedule.times[copy] = self._put(row.times[0])
-            self.schedule.velocities[copy] = self._put(row.velocities[0])
+            self.schedule.set_copy(copy, scene.schedule)
 
     # ------------------------------------------------------------------ step
     def step(self, u_n: np.ndarray) -> StepResult:
