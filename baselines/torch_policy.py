@@ -1,0 +1,116 @@
+"""The exported form of a learned shared policy: one TorchScript file any trainer can write.
+
+Every learned baseline (behaviour cloning, BenchMARL's MAPPO / IPPO / MASAC, RLlib) ends as a
+``policy.pt``: a TorchScript module mapping (M, dim) float32 observations to (M, 6) values, the
+mean action (3, normalised, clipped to [-1, 1] by the reader) and a log standard deviation (3).
+:class:`uav_formation_env.policies.learned.TorchScriptPolicy` reads it, so
+``uav-formation evaluate --policy DIR/policy.pt`` and every notebook fly it without the trainer
+installed.
+
+:class:`NormalisedMLP` is the network behaviour cloning trains and exports; :func:`save_policy`
+scripts and saves any module of that contract, and checks that the saved file gives the same
+numbers as the module on sample observations.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+__all__ = ["ACTIVATIONS", "NormalisedMLP", "save_policy"]
+
+ACTIVATIONS: dict[str, type[nn.Module]] = {
+    "tanh": nn.Tanh,
+    "relu": nn.ReLU,
+    "elu": nn.ELU,
+    "gelu": nn.GELU,
+    "silu": nn.SiLU,
+}
+
+
+class NormalisedMLP(nn.Module):
+    """Observation standardisation, an MLP, and a state-independent log-std.
+
+    Args:
+        obs_mean: (dim,) mean of the observations the network was fitted on.
+        obs_std: (dim,) their standard deviation (floored at 1e-6: constant slots stay finite).
+        hidden: widths of the hidden layers.
+        activation: a key of :data:`ACTIVATIONS`.
+        log_std: the exported log standard deviation of the action (unused by deterministic
+            evaluation; kept so the file has the TorchScript policy contract).
+        masked_slots: observation slots the network never sees (set to 0 after standardising).
+    """
+
+    def __init__(
+        self,
+        obs_mean: np.ndarray,
+        obs_std: np.ndarray,
+        hidden: Sequence[int] = (256, 256),
+        activation: str = "tanh",
+        log_std: float = -2.0,
+        masked_slots: Sequence[int] = (),
+    ) -> None:
+        super().__init__()
+        if activation not in ACTIVATIONS:
+            raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}")
+        mean = torch.as_tensor(np.asarray(obs_mean, dtype=np.float32))
+        std = torch.as_tensor(np.maximum(np.asarray(obs_std, dtype=np.float32), 1e-6))
+        if mean.ndim != 1 or mean.shape != std.shape:
+            raise ValueError(
+                f"obs_mean and obs_std must be (dim,) vectors, got {mean.shape} and {std.shape}"
+            )
+        self.register_buffer("obs_mean", mean)
+        self.register_buffer("obs_std", std)
+        mask = torch.ones_like(mean)
+        for slot in masked_slots:
+            if not 0 <= int(slot) < mask.shape[0]:
+                raise ValueError(f"masked_slots: slot {slot} outside 0..{mask.shape[0] - 1}")
+            mask[int(slot)] = 0.0
+        self.register_buffer("input_mask", mask)
+        layers: list[nn.Module] = []
+        width = int(mean.shape[0])
+        for size in hidden:
+            layers += [nn.Linear(width, int(size)), ACTIVATIONS[activation]()]
+            width = int(size)
+        layers.append(nn.Linear(width, 3))
+        self.net = nn.Sequential(*layers)
+        self.log_std = nn.Parameter(torch.full((3,), float(log_std)), requires_grad=False)
+
+    def mean_action(self, obs: torch.Tensor) -> torch.Tensor:
+        """(M, dim) observations -> (M, 3) mean normalised action (unclipped)."""
+        return self.net((obs - self.obs_mean) / self.obs_std * self.input_mask)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """(M, dim) observations -> (M, 6): mean action and log-std."""
+        mean = self.mean_action(obs)
+        return torch.cat([mean, self.log_std.expand_as(mean)], dim=-1)
+
+
+def save_policy(module: nn.Module, path: str | Path, sample: np.ndarray) -> Path:
+    """Script ``module`` and save it as ``path``; return the path.
+
+    Args:
+        module: (M, dim) float32 -> (M, 6) (mean action, log-std).
+        path: the ``.pt`` file (parents created).
+        sample: (M, dim) observations the saved file must map to the module's own outputs
+            (max abs difference <= 1e-6); a ``RuntimeError`` names the difference otherwise.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    module = module.eval()
+    scripted = torch.jit.script(module)
+    scripted.save(str(path))
+    loaded = torch.jit.load(str(path), map_location="cpu")
+    obs = torch.as_tensor(np.asarray(sample, dtype=np.float32))
+    with torch.no_grad():
+        want, got = module(obs), loaded(obs)
+    if got.shape != (obs.shape[0], 6):
+        raise RuntimeError(f"the exported policy returns {tuple(got.shape)}, expected (M, 6)")
+    difference = float((want - got).abs().max())
+    if difference > 1e-6:
+        raise RuntimeError(f"the saved policy differs from the module by {difference:.3g}")
+    return path

@@ -1,0 +1,133 @@
+"""Behaviour cloning with DAgger (uav_formation_baselines.imitation) and the exported policy form
+(uav_formation_baselines.torch_policy)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from uav_formation_baselines.imitation import (  # noqa: E402
+    ImitationConfig,
+    collect,
+    fit,
+    load_config,
+    main,
+    train_imitation,
+)
+from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
+from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
+from uav_formation_env.episode import FormationEpisodes  # noqa: E402
+from uav_formation_env.policies import make_policy  # noqa: E402
+from uav_formation_env.policies.dmpc import NashDMPCPolicy  # noqa: E402
+
+SHORT = with_overrides(resolve_scenario("paper"), {"duration": 2.0})  # 10 steps
+
+
+class ZeroPolicy:
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        return np.zeros((*obs.shape[:2], 3))
+
+
+def test_config_rejects_unknown_and_bad_values(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="unknown key 'epochz'"):
+        ImitationConfig.from_mapping({"epochz": 3})
+    with pytest.raises(ValueError, match="teacher must be one of"):
+        ImitationConfig(teacher="ppo")
+    with pytest.raises(ValueError, match="rounds must be an integer >= 1"):
+        ImitationConfig(rounds=0)
+    with pytest.raises(ValueError, match="beta must lie in"):
+        ImitationConfig(beta=1.5)
+    path = tmp_path / "bc.yml"
+    path.write_text("default: {rounds: 2}\npaper: {episodes: 3}\n")
+    config = load_config("paper", path, epochs=4)
+    assert (config.rounds, config.episodes, config.epochs) == (2, 3, 4)
+    assert load_config("paper").teacher == "exact"  # the shipped file loads
+
+
+def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
+    obs, labels = collect(SHORT, "exact", [3, 4])
+    assert obs.shape == (10 * 2 * 5, 47) and labels.shape == (10 * 2 * 5, 3)
+    # the same teacher, flown on its own, sees the same observations and acts the same
+    episodes = FormationEpisodes(SHORT, 2, fly_on_after_collision=True)
+    teacher = NashDMPCPolicy(SHORT, "exact", threshold=0.0)
+    teacher.reset(2, seeds=[3, 4])
+    step = episodes.reset(seed=[3, 4])
+    for k in range(10):
+        action = teacher.act_batch(step.observation)
+        rows = slice(k * 10, (k + 1) * 10)
+        np.testing.assert_array_equal(obs[rows], step.observation.reshape(10, 47))
+        np.testing.assert_allclose(labels[rows], action.reshape(10, 3), atol=1e-6)
+        step = episodes.step(action)
+
+
+def test_learner_rollout_follows_the_learner_and_is_labelled_by_the_teacher() -> None:
+    obs, labels = collect(SHORT, "exact", [3], learner=ZeroPolicy(), teacher_probability=0.0)
+    episodes = FormationEpisodes(SHORT, 1, fly_on_after_collision=True)
+    step = episodes.reset(seed=[3])
+    for k in range(3):
+        np.testing.assert_array_equal(obs[k * 5 : (k + 1) * 5], step.observation[0])
+        step = episodes.step(np.zeros((1, 5, 3)))  # the learner's action was executed
+    assert np.abs(labels).max() > 0.01  # labels are the teacher's, not the learner's zeros
+
+
+def test_masked_slot_is_never_seen_and_export_round_trips(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    sample = rng.normal(size=(32, 47)).astype(np.float32)
+    model = NormalisedMLP(np.zeros(47), np.ones(47), (16,), "tanh", masked_slots=[12])
+    changed = sample.copy()
+    changed[:, 12] += 5.0
+    with torch.no_grad():
+        a, b = model(torch.as_tensor(sample)), model(torch.as_tensor(changed))
+    torch.testing.assert_close(a, b, rtol=0, atol=0)
+    changed[:, 11] += 5.0
+    with torch.no_grad():
+        assert not torch.equal(a, model(torch.as_tensor(changed)))
+    path = save_policy(model, tmp_path / "policy.pt", sample)
+    loaded = make_policy(str(path), SHORT)
+    expected = np.clip(a[:, :3].numpy(), -1, 1).reshape(4, 8, 3)
+    np.testing.assert_allclose(loaded.act_batch(sample.reshape(4, 8, 47)), expected, atol=1e-6)
+    with pytest.raises(ValueError, match="masked_slots: slot 47"):
+        NormalisedMLP(np.zeros(47), np.ones(47), masked_slots=[47])
+
+
+def test_fit_learns_a_feedback_law() -> None:
+    rng = np.random.default_rng(1)
+    obs = rng.normal(size=(4000, 10)).astype(np.float32)
+    target = np.tanh(obs[:, :3] - 0.5 * obs[:, 3:6]).astype(np.float32)
+    model = NormalisedMLP(obs.mean(0), obs.std(0), (64,), "tanh")
+    with torch.no_grad():
+        before = float(
+            torch.mean((model.mean_action(torch.as_tensor(obs)) - torch.as_tensor(target)) ** 2)
+        )
+    config = ImitationConfig(epochs=30, batch_size=256, learning_rate=3e-3)
+    after = fit(model, obs, target, config, seed=0)
+    assert after < before / 10
+
+
+def test_train_writes_a_loadable_policy(tmp_path: Path) -> None:
+    config = ImitationConfig(
+        rounds=2,
+        episodes=1,
+        epochs=1,
+        validation_seeds=1,
+        hidden=(8,),
+        duration=2.0,
+        masked_slots=(12,),
+    )
+    record = train_imitation("paper", tmp_path, config, seed=0, progress=False)
+    assert record["agent_steps"] == 2 * 10 * 5
+    rows = (tmp_path / "rounds.csv").read_text().strip().splitlines()
+    assert len(rows) == 3 and rows[0].startswith("round,samples,loss")
+    policy = make_policy(str(tmp_path / "policy.pt"), SHORT)
+    actions = policy.act_batch(np.zeros((1, 5, 47), dtype=np.float32))
+    assert actions.shape == (1, 5, 3)
+
+
+def test_cli_reports_bad_settings_in_one_line(tmp_path: Path, capsys) -> None:
+    assert main(["--out", str(tmp_path), "--set", "rounds=0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: rounds must be an integer >= 1, got 0"]
