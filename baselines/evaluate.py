@@ -49,10 +49,13 @@ OUTPUT_FILES = (
 
 
 def model_path(run: str | Path, best: bool = False) -> Path:
-    """The model file of a run directory (``model.zip`` or ``best/model.zip``) or a .zip path."""
+    """The model file of a run directory (``model.zip`` or ``best/model.zip`` of an SB3 run, or
+    ``policy.pt`` of the DAgger, BenchMARL and RLlib recipes) or a model file."""
     run = Path(run)
     if run.is_file():
         return run
+    if not best and (run / "policy.pt").is_file():
+        return run / "policy.pt"
     path = run / "best" / "model.zip" if best else run / "model.zip"
     if not path.is_file():
         raise ValueError(f"no model at {path}")

@@ -74,6 +74,10 @@ class ImitationConfig:
         masked_slots: observation slots the network never sees (e.g. 12, the time t / duration:
             with it, the MLP can learn the teacher's actions as a schedule in time rather than
             a feedback law).
+        proximity_weight: loss weight of the UAV-steps where another UAV is nearer than the
+            separation distance d_s (``cost.separation_distance``, where the teacher's
+            separation term acts) [-]; 1 weighs every step alike. Those steps are rare (the
+            start transient) and are where a clone's small errors become collisions.
         validation_seeds: validation episodes per round [-].
         seed_start, validation_seed_start: first training / validation episode seed.
         overrides: scenario field overrides (e.g. ``{observation: {kind: local}}``).
@@ -91,6 +95,7 @@ class ImitationConfig:
     batch_size: int = 2048
     learning_rate: float = 1e-3
     masked_slots: tuple[int, ...] = ()
+    proximity_weight: float = 1.0
     validation_seeds: int = 4
     seed_start: int = 10_000
     validation_seed_start: int = 5_000
@@ -113,6 +118,8 @@ class ImitationConfig:
             raise ValueError(f"teacher_threshold must be >= 0, got {self.teacher_threshold!r}")
         if not 0.0 <= self.beta <= 1.0:
             raise ValueError(f"beta must lie in [0, 1], got {self.beta!r}")
+        if not self.proximity_weight >= 1.0:
+            raise ValueError(f"proximity_weight must be >= 1, got {self.proximity_weight!r}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
         if self.duration is not None and not self.duration > 0:
@@ -157,7 +164,7 @@ def collect(
     learner: Any | None = None,
     teacher_probability: float = 1.0,
     mix_seed: int = 0,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fly one episode per seed and label every UAV-step with the teacher's action.
 
     Args:
@@ -171,10 +178,11 @@ def collect(
         mix_seed: seed of the coin flips.
 
     Returns:
-        ``(obs (M, dim) float32, actions (M, 3) float32)`` over every copy, UAV and step.
+        ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m])`` over every copy, UAV
+        and step; ``nearest`` is the distance from the UAV to its nearest other UAV.
     """
     coins = np.random.default_rng(mix_seed)
-    observations, labels = [], []
+    observations, labels, nearest = [], [], []
     for n_uav, group in seeds_by_n_uav(scenario, seeds).items():
         episodes = FormationEpisodes(scenario, len(group), fly_on_after_collision=True, n_uav=n_uav)
         teacher = NashDMPCPolicy(scenario, teacher_name, threshold=teacher_threshold)
@@ -188,24 +196,36 @@ def collect(
             )
             observations.append(obs.reshape(-1, obs.shape[-1]))
             labels.append(np.asarray(label, dtype=np.float32).reshape(-1, 3))
+            nearest.append(np.asarray(step.result.min_separation, dtype=float).reshape(-1))
             action = label
             if learner is not None and teacher_probability < 1.0:
                 own = np.asarray(learner.act_batch(obs), dtype=float)
                 use_teacher = coins.random(len(group)) < teacher_probability
                 action = np.where(use_teacher[:, None, None], label, own)
             step = episodes.step(action)
-    return np.concatenate(observations), np.concatenate(labels)
+    return np.concatenate(observations), np.concatenate(labels), np.concatenate(nearest)
 
 
 def fit(
-    model: NormalisedMLP, obs: np.ndarray, actions: np.ndarray, config: ImitationConfig, seed: int
+    model: NormalisedMLP,
+    obs: np.ndarray,
+    actions: np.ndarray,
+    config: ImitationConfig,
+    seed: int,
+    weights: np.ndarray | None = None,
 ) -> float:
-    """``config.epochs`` passes of Adam on the mean squared error of the mean action against
-    the teacher's; returns the last epoch's mean loss."""
+    """``config.epochs`` passes of Adam on the (weighted) mean squared error of the mean action
+    against the teacher's; ``weights`` (M,) per sample (None: 1); returns the last epoch's mean
+    weighted loss."""
     import torch
 
     generator = torch.Generator().manual_seed(seed)
     inputs, targets = torch.as_tensor(obs), torch.as_tensor(actions)
+    sample_weight = (
+        torch.ones(len(inputs))
+        if weights is None
+        else torch.as_tensor(np.asarray(weights, dtype=np.float32))
+    )
     optimiser = torch.optim.Adam(model.net.parameters(), lr=config.learning_rate)
     model.train()
     loss_sum = 0.0
@@ -214,7 +234,9 @@ def fit(
         loss_sum, count = 0.0, 0
         for start in range(0, len(order), config.batch_size):
             index = order[start : start + config.batch_size]
-            loss = torch.mean((model.mean_action(inputs[index]) - targets[index]) ** 2)
+            error = ((model.mean_action(inputs[index]) - targets[index]) ** 2).mean(dim=-1)
+            weight = sample_weight[index]
+            loss = (weight * error).sum() / weight.sum()
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
@@ -252,13 +274,14 @@ def train_imitation(
     )
     all_obs: list[np.ndarray] = []
     all_actions: list[np.ndarray] = []
+    all_weights: list[np.ndarray] = []
     model: NormalisedMLP | None = None
     learner = None
     rows: list[dict[str, Any]] = []
     for r in range(config.rounds):
         first = config.seed_start + seed * 100_000 + r * config.episodes
         seeds = list(range(first, first + config.episodes))
-        obs, actions = collect(
+        obs, actions, nearest = collect(
             scen,
             config.teacher,
             seeds,
@@ -269,6 +292,8 @@ def train_imitation(
         )
         all_obs.append(obs)
         all_actions.append(actions)
+        close = nearest < scen.cost.separation_distance
+        all_weights.append(np.where(close, config.proximity_weight, 1.0))
         data_obs, data_actions = np.concatenate(all_obs), np.concatenate(all_actions)
         if model is None:  # normalise by the teacher's own state distribution, fixed afterwards
             model = NormalisedMLP(
@@ -278,7 +303,9 @@ def train_imitation(
                 config.activation,
                 masked_slots=config.masked_slots,
             )
-        loss = fit(model, data_obs, data_actions, config, seed * 1000 + r)
+        loss = fit(
+            model, data_obs, data_actions, config, seed * 1000 + r, np.concatenate(all_weights)
+        )
         path = save_policy(model, out / "rounds" / str(r) / "policy.pt", data_obs[:64])
         learner = make_policy(str(path), scen)
         summary = summarise_groups(run_episode_groups(scen, learner, validation))
@@ -286,6 +313,7 @@ def train_imitation(
         row = {
             "round": r,
             "samples": len(data_obs),
+            "close_fraction": float(np.mean(np.concatenate(all_weights) > 1.0)),
             "loss": loss,
             "teacher_probability": config.beta**r if r else 1.0,
             "validation_completed": mission["completed"],

@@ -146,3 +146,52 @@ def mission_bars(
         ax.set_xticklabels(short, rotation=30, ha="right", fontsize=8)
         ax.grid(True, axis="y", which="both", alpha=0.3)
     return _save(fig, png)
+
+
+def training_curves(
+    run_dirs: Sequence[str | Path],
+    png: str | Path,
+    reference_cost: float | None = None,
+) -> Path:
+    """Learning curves of the DAgger and BenchMARL recipes, one line per run, coloured by the
+    algorithm of its ``config.yaml``.
+
+    Left: DAgger's validation realised J per UAV after each round (``rounds.csv``: deterministic
+    policy, full episodes, the validation seeds) over the labelled agent-steps so far, with
+    ``reference_cost`` (LFPIO's realised J on the evaluation seeds) as a dashed line. Right:
+    BenchMARL's training reward per UAV-step (``progress.csv``: the transformed reward the
+    algorithm optimises, stochastic policy) over frames.
+    """
+    import yaml
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    colours: dict[str, Any] = {}
+    for run in map(Path, run_dirs):
+        config = yaml.safe_load((run / "config.yaml").read_text()) or {}
+        algorithm = str(config.get("algorithm") or config.get("algo"))
+        label = None if algorithm in colours else algorithm  # one legend entry per algorithm
+        colour = colours.setdefault(algorithm, f"C{len(colours)}")
+        xs, ys = _column(run / "rounds.csv", "samples", "validation_cost")
+        if xs:
+            left.plot(xs, ys, "o-", color=colour, label=label)
+        xs, ys = _column(run / "progress.csv", "frames", "mean_reward_per_uav_step")
+        if xs:
+            right.plot(xs, ys, "-", color=colour, label=label)
+    if reference_cost is not None:
+        left.axhline(reference_cost, color="k", ls="--", label="LFPIO (evaluation seeds)")
+    left.set_yscale("log")
+    left.set_xlabel("labelled agent-steps")
+    left.set_ylabel("validation realised J per UAV")
+    left.set_title("DAgger from the reference")
+    right.set_xlabel("frames (env steps)")
+    right.set_ylabel("training reward per UAV-step (transformed)")
+    right.set_title("BenchMARL")
+    for axis in (left, right):
+        if axis.lines:
+            axis.legend(fontsize=8)
+        axis.grid(alpha=0.3)
+    fig.tight_layout()
+    png = Path(png)
+    fig.savefig(png, dpi=120)
+    plt.close(fig)
+    return png

@@ -49,7 +49,8 @@ def test_config_rejects_unknown_and_bad_values(tmp_path: Path) -> None:
 
 
 def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
-    obs, labels = collect(SHORT, "exact", [3, 4])
+    obs, labels, nearest = collect(SHORT, "exact", [3, 4])
+    assert nearest.shape == (10 * 2 * 5,) and nearest.min() > 0
     assert obs.shape == (10 * 2 * 5, 47) and labels.shape == (10 * 2 * 5, 3)
     # the same teacher, flown on its own, sees the same observations and acts the same
     episodes = FormationEpisodes(SHORT, 2, fly_on_after_collision=True)
@@ -61,11 +62,12 @@ def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
         rows = slice(k * 10, (k + 1) * 10)
         np.testing.assert_array_equal(obs[rows], step.observation.reshape(10, 47))
         np.testing.assert_allclose(labels[rows], action.reshape(10, 3), atol=1e-6)
+        np.testing.assert_array_equal(nearest[rows], step.result.min_separation.reshape(10))
         step = episodes.step(action)
 
 
 def test_learner_rollout_follows_the_learner_and_is_labelled_by_the_teacher() -> None:
-    obs, labels = collect(SHORT, "exact", [3], learner=ZeroPolicy(), teacher_probability=0.0)
+    obs, labels, _ = collect(SHORT, "exact", [3], learner=ZeroPolicy(), teacher_probability=0.0)
     episodes = FormationEpisodes(SHORT, 1, fly_on_after_collision=True)
     step = episodes.reset(seed=[3])
     for k in range(3):
@@ -108,6 +110,24 @@ def test_fit_learns_a_feedback_law() -> None:
     assert after < before / 10
 
 
+def test_fit_weights_decide_between_contradicting_labels() -> None:
+    obs = np.zeros((2000, 4), dtype=np.float32)  # one state, two answers
+    target = np.repeat(np.array([[0.5, 0, 0], [-0.5, 0, 0]], dtype=np.float32), 1000, axis=0)
+    weights = np.repeat([9.0, 1.0], 1000)  # the weighted mean answer is 0.4
+    model = NormalisedMLP(np.zeros(4), np.ones(4), (8,), "tanh")
+    fit(
+        model,
+        obs,
+        target,
+        ImitationConfig(epochs=60, batch_size=500, learning_rate=1e-2),
+        0,
+        weights,
+    )
+    with torch.no_grad():
+        answer = model.mean_action(torch.zeros(1, 4))[0, 0].item()
+    assert answer == pytest.approx(0.4, abs=0.03)
+
+
 def test_train_writes_a_loadable_policy(tmp_path: Path) -> None:
     config = ImitationConfig(
         rounds=2,
@@ -121,7 +141,7 @@ def test_train_writes_a_loadable_policy(tmp_path: Path) -> None:
     record = train_imitation("paper", tmp_path, config, seed=0, progress=False)
     assert record["agent_steps"] == 2 * 10 * 5
     rows = (tmp_path / "rounds.csv").read_text().strip().splitlines()
-    assert len(rows) == 3 and rows[0].startswith("round,samples,loss")
+    assert len(rows) == 3 and rows[0].startswith("round,samples,close_fraction,loss")
     policy = make_policy(str(tmp_path / "policy.pt"), SHORT)
     actions = policy.act_batch(np.zeros((1, 5, 47), dtype=np.float32))
     assert actions.shape == (1, 5, 3)
@@ -131,3 +151,33 @@ def test_cli_reports_bad_settings_in_one_line(tmp_path: Path, capsys) -> None:
     assert main(["--out", str(tmp_path), "--set", "rounds=0"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["error: rounds must be an integer >= 1, got 0"]
+
+
+def test_results_table_aggregates_runs_over_training_seeds(tmp_path: Path) -> None:
+    import json
+
+    from uav_formation_baselines.results import main as results_main
+
+    config = ImitationConfig(
+        rounds=1, episodes=1, epochs=1, validation_seeds=1, hidden=(8,), duration=2.0
+    )
+    runs = [tmp_path / f"run{seed}" for seed in (0, 1)]
+    for seed, run in enumerate(runs):
+        train_imitation("paper", run, config, seed=seed, progress=False)
+    out = tmp_path / "table"
+    argv = [*map(str, runs), "--seeds", "3", "--compare", "lfpio", "--out", str(out)]
+    assert results_main(argv) == 0
+    table = json.loads((out / "results.json").read_text())
+    summaries = json.loads((out / "summaries.json").read_text())
+    row, reference = table["rows"]
+    assert row["policy"] == "dagger" and row["training_seeds"] == 2
+    per_run = [summaries[str(run)]["realised_cost_mean"] for run in runs]
+    half = 12.706 * np.std(per_run, ddof=1) / np.sqrt(2)  # Student t, 1 degree of freedom
+    assert row["realised_cost_mean"] == pytest.approx(np.mean(per_run))
+    assert row["realised_cost_mean_ci95"] == pytest.approx(half)
+    assert row["episodes"] == 6
+    assert row["completed"] == sum(summaries[str(r)]["mission"]["completed"] for r in runs)
+    assert reference["policy"] == "lfpio" and reference["training_seeds"] is None
+    assert reference["cost_ratio_to_reference"] == pytest.approx(1.0)
+    assert (out / "learning_curves.png").stat().st_size > 1000
+    assert (out / "results.md").read_text().count("\n| ") == 3  # header + 2 rows

@@ -1,0 +1,199 @@
+"""The results table of the learned baselines: one row per algorithm over its training seeds.
+
+    python -m uav_formation_baselines.results runs/dagger_paper_s0 runs/dagger_paper_s1 ... \
+        --seeds 20 --compare lfpio pio exact nash --out baselines/eval_results/paper_learned
+
+Every run directory (DAgger, BenchMARL, SB3 or RLlib recipe) is flown deterministically on the
+same held-out seeds by the project's runner (:func:`uav_formation_baselines.evaluate.
+evaluate_policy_name`, as ``uav-formation evaluate``), and its runs are grouped by the algorithm
+named in their ``config.yaml`` (``algorithm:`` or SB3's ``algo:``). An algorithm's row holds,
+over its training seeds, the mean and 95 % confidence half-width (Student t, one value per
+training seed: that run's mean over the evaluation seeds) of the realised J per UAV, route error
+max, route error RMS and velocity RMSE; the missions completed (all runs' episodes together, and
+per run); collisions after t = 0 (UAV-steps, summed); wall time and agent-steps per run. A
+reference policy (``--compare``) is one deterministic row whose interval is over the evaluation
+seeds. Nothing is computed here that the runner's summaries do not hold.
+
+``--out`` receives ``results.md``, ``results.csv``, ``results.json`` (rows, per-run rows and the
+command), ``summaries.json`` (every summary) and ``learning_curves.png``
+(:func:`uav_formation_baselines.plots.training_curves`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import shlex
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from uav_formation_baselines.evaluate import (
+    REFERENCE,
+    comparison_row,
+    evaluate_policy_name,
+    model_path,
+    run_scenario,
+)
+from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.evaluation import mean_ci95, write_json
+
+__all__ = ["algorithm_rows", "run_record", "main"]
+
+MEASURES = ("realised_cost_mean", "route_error_max_m", "route_error_rms_m", "velocity_rmse_mps")
+
+
+def run_record(run: str | Path) -> dict[str, Any]:
+    """The run's ``config.yaml`` with ``algorithm``, ``agent_steps`` and ``wall_time_s`` filled
+    in from whichever recipe wrote it."""
+    with open(Path(run) / "config.yaml", encoding="utf-8") as stream:
+        config = yaml.safe_load(stream) or {}
+    algorithm = config.get("algorithm") or config.get("algo")
+    if not algorithm:
+        raise ValueError(f"{run}/config.yaml names no algorithm ('algorithm:' or 'algo:')")
+    steps = config.get("agent_steps", config.get("timesteps"))
+    return {**config, "algorithm": str(algorithm), "agent_steps": steps}
+
+
+def algorithm_rows(
+    runs: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]],
+    references: dict[str, dict[str, Any]],
+) -> list[dict[str, Any]]:
+    """Rows of the table: per algorithm its runs' ``(record, summary)`` aggregated over training
+    seeds, then one row per reference summary."""
+    ref = references.get(REFERENCE)
+    ref_cost = ref["realised_cost_mean"] if ref else None
+    rows = []
+    for algorithm, pairs in runs.items():
+        per_run = [comparison_row(algorithm, summary, ref_cost) for _, summary in pairs]
+        row: dict[str, Any] = {"policy": algorithm, "training_seeds": len(pairs)}
+        for key in MEASURES:
+            mean, half = mean_ci95(np.array([r[key] for r in per_run]))
+            row[key], row[f"{key}_ci95"] = mean, half
+        row["cost_ratio_to_reference"] = row["realised_cost_mean"] / ref_cost if ref_cost else None
+        row["completed"] = sum(r["completed"] for r in per_run)
+        row["episodes"] = sum(r["episodes"] for r in per_run)
+        row["completed_per_run"] = [r["completed"] for r in per_run]
+        row["collisions_after_start"] = sum(r["collisions_after_start"] for r in per_run)
+        row["min_separation_after_start_m"] = min(
+            r["min_separation_after_start_m"] for r in per_run
+        )
+        obstacles = [k[:-4] for k in per_run[0] if k.endswith("_met")]
+        row["obstacles_met"] = {o: sum(r[f"{o}_met"] for r in per_run) for o in obstacles}
+        row["wall_time_s_per_run"] = float(
+            np.mean([rec.get("wall_time_s") or np.nan for rec, _ in pairs])
+        )
+        row["agent_steps_per_run"] = float(
+            np.mean([rec.get("agent_steps") or np.nan for rec, _ in pairs])
+        )
+        rows.append(row)
+    for name, summary in references.items():
+        single = comparison_row(name, summary, ref_cost)
+        row = {"policy": name, "training_seeds": None}
+        for key in MEASURES:
+            ci_key = "realised_cost_ci95" if key == "realised_cost_mean" else f"{key}_ci95"
+            row[key], row[f"{key}_ci95"] = single[key], single[ci_key]
+        row["cost_ratio_to_reference"] = single["cost_ratio_to_reference"]
+        row["completed"], row["episodes"] = single["completed"], single["episodes"]
+        row["completed_per_run"] = [single["completed"]]
+        row["collisions_after_start"] = single["collisions_after_start"]
+        row["min_separation_after_start_m"] = single["min_separation_after_start_m"]
+        obstacles = [k[:-4] for k in single if k.endswith("_met")]
+        row["obstacles_met"] = {o: single[f"{o}_met"] for o in obstacles}
+        row["wall_time_s_per_run"] = row["agent_steps_per_run"] = None
+        rows.append(row)
+    return rows
+
+
+def _pm(row: dict[str, Any], key: str, digits: int) -> str:
+    return f"{row[key]:.{digits}f} ± {row[f'{key}_ci95']:.{digits}f}"
+
+
+def format_markdown(rows: list[dict[str, Any]]) -> str:
+    """The table as markdown."""
+    head = (
+        "| policy | training seeds | realised J per UAV | vs LFPIO | missions completed "
+        "(per run) | route error max [m] | route error RMS [m] | velocity RMSE [m/s] | obstacles "
+        "met | collisions after t = 0 | min separation [m] | wall time per run [s] | agent-steps "
+        "per run |"
+    )
+    lines = [head, "|" + "---|" * 13]
+    for row in rows:
+        cost = f"{row['realised_cost_mean']:.3g} ± {row['realised_cost_mean_ci95']:.2g}"
+        ratio = row["cost_ratio_to_reference"]
+        per_run = ", ".join(str(c) for c in row["completed_per_run"])
+        met = ", ".join(f"{o} {k}" for o, k in row["obstacles_met"].items())
+        wall = row["wall_time_s_per_run"]
+        steps = row["agent_steps_per_run"]
+        lines.append(
+            f"| {row['policy']} | {row['training_seeds'] or '-'} | {cost} | "
+            f"{'-' if ratio is None else f'{ratio:.2f}x'} | {row['completed']}/{row['episodes']} "
+            f"({per_run}) | {_pm(row, 'route_error_max_m', 1)} | {_pm(row, 'route_error_rms_m', 1)}"
+            f" | {_pm(row, 'velocity_rmse_mps', 2)} | {met} | {row['collisions_after_start']} | "
+            f"{row['min_separation_after_start_m']:.2f} | "
+            f"{'-' if wall is None else f'{wall:.0f}'} | "
+            f"{'-' if steps is None else f'{steps:.3g}'} |"
+        )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m uav_formation_baselines.results",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("runs", nargs="+", help="run directories (config.yaml + model)")
+    parser.add_argument("--seeds", type=int, default=20, help="episodes, seeds seed-start..")
+    parser.add_argument("--seed-start", type=int, default=0)
+    parser.add_argument("--scenario", default=None, help="default: the first run's")
+    parser.add_argument("--compare", nargs="*", default=[REFERENCE], help="reference policies")
+    parser.add_argument("--out", default=None, help="output directory")
+    args = parser.parse_args(argv)
+    scenario = resolve_scenario(args.scenario) if args.scenario else run_scenario(args.runs[0])
+    seeds = list(range(args.seed_start, args.seed_start + args.seeds))
+    grouped: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]] = {}
+    summaries: dict[str, dict[str, Any]] = {}
+    for run in args.runs:
+        record = run_record(run)
+        summary = evaluate_policy_name(str(model_path(run)), scenario, seeds)
+        grouped.setdefault(record["algorithm"], []).append((record, summary))
+        summaries[str(run)] = summary
+        print(f"{run}: {summary['mission']['completed']}/{len(seeds)} completed", file=sys.stderr)
+    references = {name: evaluate_policy_name(name, scenario, seeds) for name in args.compare}
+    summaries.update(references)
+    rows = algorithm_rows(grouped, references)
+    table = format_markdown(rows)
+    print(table)
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        argv = sys.argv[1:] if argv is None else list(argv)
+        command = shlex.join(["python", "-m", "uav_formation_baselines.results", *argv])
+        (out / "results.md").write_text(f"```bash\n{command}\n```\n\n{table}\n", encoding="utf-8")
+        flat = [{k: v for k, v in row.items() if not isinstance(v, dict | list)} for row in rows]
+        with open(out / "results.csv", "w", newline="", encoding="utf-8") as stream:
+            writer = csv.DictWriter(stream, fieldnames=list(flat[0]))
+            writer.writeheader()
+            writer.writerows(flat)
+        write_json(
+            {"command": command, "scenario": scenario.name, "seeds": seeds, "rows": rows},
+            out / "results.json",
+        )
+        write_json(summaries, out / "summaries.json")
+        from uav_formation_baselines.plots import training_curves
+
+        lfpio = references.get(REFERENCE, {}).get("realised_cost_mean")
+        training_curves(args.runs, out / "learning_curves.png", reference_cost=lfpio)
+        print(
+            f"wrote {out}/results.md, results.csv, results.json, summaries.json, "
+            "learning_curves.png"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
