@@ -38,7 +38,15 @@ from uav_formation_baselines.torch_policy import ACTIVATIONS, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config_io import save_scenario
 
-__all__ = ["ALGORITHMS", "BenchmarlRunConfig", "export_actor", "load_config", "train_benchmarl"]
+__all__ = [
+    "ALGORITHMS",
+    "BenchmarlRunConfig",
+    "export_actor",
+    "formation_task",
+    "load_config",
+    "make_experiment",
+    "train_benchmarl",
+]
 
 ALGORITHMS = ("mappo", "ippo", "masac")
 ON_POLICY = ("mappo", "ippo")
@@ -125,12 +133,22 @@ def load_config(algo: str, path: str | Path | None = None, **patch: Any) -> Benc
     return BenchmarlRunConfig(**values)
 
 
-def _experiment(algo: str, scenario: str, config: BenchmarlRunConfig, seed: int, folder: Path):
+def formation_task(scenario: str, config: BenchmarlRunConfig) -> Any:
+    """The BenchMARL task of a scenario with ``config.task``'s options (batched torch env unless
+    ``task.backend`` says otherwise)."""
+    from uav_formation_baselines.benchmarl_task import uav_formation_task
+
+    return uav_formation_task(scenario, **{"backend": "torch", **config.task})
+
+
+def make_experiment(
+    algo: str, task: Any, config: BenchmarlRunConfig, seed: int, folder: str | Path
+) -> Any:
+    """A BenchMARL ``Experiment`` of ``algo`` on any BenchMARL ``task`` (ours or a peer's, for the
+    same-run benchmark) with the settings of ``config``, on CPU, CSV logging into ``folder``."""
     from benchmarl.algorithms import IppoConfig, MappoConfig, MasacConfig
     from benchmarl.experiment import Experiment, ExperimentConfig
     from benchmarl.models.mlp import MlpConfig
-
-    from uav_formation_baselines.benchmarl_task import uav_formation_task
 
     experiment_config = ExperimentConfig.get_from_yaml()
     experiment_config.sampling_device = experiment_config.train_device = "cpu"
@@ -158,9 +176,8 @@ def _experiment(algo: str, scenario: str, config: BenchmarlRunConfig, seed: int,
         activation_class=ACTIVATIONS[config.activation],
         layer_class=nn.Linear,
     )
-    task_options = {"backend": "torch", **config.task}
     return Experiment(
-        task=uav_formation_task(scenario, **task_options),
+        task=task,
         algorithm_config=algorithms[algo].get_from_yaml(),
         model_config=model,
         critic_model_config=model,
@@ -232,7 +249,7 @@ def train_benchmarl(
     out = Path(out)
     folder = out / "benchmarl"
     folder.mkdir(parents=True, exist_ok=True)
-    experiment = _experiment(algo, scenario, config, seed, folder)
+    experiment = make_experiment(algo, formation_task(scenario, config), config, seed, folder)
     progress: list[dict[str, Any]] = []
     started = time.perf_counter()
 

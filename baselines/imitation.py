@@ -227,6 +227,10 @@ def fit(
         else torch.as_tensor(np.asarray(weights, dtype=np.float32))
     )
     optimiser = torch.optim.Adam(model.net.parameters(), lr=config.learning_rate)
+    # cosine decay to 0 over the round: the last weights are not a noisy SGD iterate, which
+    # matters in closed loop (without it, validation completion jumped between rounds)
+    batches = config.epochs * -(-len(inputs) // config.batch_size)
+    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=batches)
     model.train()
     loss_sum = 0.0
     for _ in range(config.epochs):
@@ -240,6 +244,7 @@ def fit(
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
+            schedule.step()
             loss_sum += float(loss.detach()) * len(index)
             count += len(index)
         loss_sum /= count

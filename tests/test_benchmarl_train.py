@@ -13,10 +13,11 @@ from tensordict import TensorDict  # noqa: E402
 from torchrl.envs.utils import ExplorationType, set_exploration_type  # noqa: E402
 
 from uav_formation_baselines.benchmarl_train import (  # noqa: E402
-    _experiment,
     actor_module,
+    formation_task,
     load_config,
     main,
+    make_experiment,
 )
 from uav_formation_env.config_io import resolve_scenario  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
@@ -36,7 +37,7 @@ TINY = {
 
 def test_config_layers_and_unknown_keys(tmp_path: Path) -> None:
     config = load_config("masac", frames=1000, task={"reward": "raw"})
-    assert config.frames == 1000 and config.optimizer_steps == 200
+    assert config.frames == 1000 and config.optimizer_steps == 100
     assert config.task["reward"] == "raw" and config.task["corridor_width"] == 200.0
     with pytest.raises(ValueError, match="unknown key 'framez'"):
         load_config("mappo", framez=3)
@@ -49,7 +50,8 @@ def test_config_layers_and_unknown_keys(tmp_path: Path) -> None:
 @pytest.mark.parametrize("algo", ["mappo", "masac"])
 def test_exported_actor_is_the_deterministic_benchmarl_policy(algo: str, tmp_path: Path) -> None:
     config = load_config(algo, **TINY)
-    experiment = _experiment(algo, "paper", config, seed=0, folder=tmp_path)
+    task = formation_task("paper", config)
+    experiment = make_experiment(algo, task, config, seed=0, folder=tmp_path)
     rng = np.random.default_rng(0)
     obs = torch.as_tensor(rng.normal(scale=0.5, size=(3, 5, 47)).astype(np.float32))
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():

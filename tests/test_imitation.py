@@ -181,3 +181,25 @@ def test_results_table_aggregates_runs_over_training_seeds(tmp_path: Path) -> No
     assert reference["cost_ratio_to_reference"] == pytest.approx(1.0)
     assert (out / "learning_curves.png").stat().st_size > 1000
     assert (out / "results.md").read_text().count("\n| ") == 3  # header + 2 rows
+
+
+def test_cli_evaluate_flies_a_model_on_its_own_scenario(tmp_path: Path, capsys) -> None:
+    from uav_formation_env.cli import main as cli_main
+
+    config = ImitationConfig(
+        rounds=1,
+        episodes=1,
+        epochs=1,
+        validation_seeds=1,
+        hidden=(8,),
+        duration=2.0,
+        overrides={"observation": {"kind": "local"}},
+    )
+    train_imitation("paper", tmp_path / "run", config, progress=False)
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--policy", str(tmp_path / "run"), "--seeds", "2", "--quiet"]
+    assert cli_main([*argv, "--out", str(out)]) == 0
+    assert "2 s episodes" in capsys.readouterr().out  # the run's scenario.yaml, not the paper's
+    # the paper's own scenario (full layout, 47 values) cannot feed the 95-value local model
+    assert cli_main([*argv, "--scenario", "paper", "--out", str(out)]) != 0
+    assert "95" in capsys.readouterr().err

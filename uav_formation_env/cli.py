@@ -77,8 +77,22 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _model_scenario(policy: str) -> str | Path:
+    """The scenario a saved model was trained for: the ``scenario.yaml`` of its run directory
+    (the directory itself, or the model file's), else ``"paper"``. A model must fly the scenario
+    it was trained on: its observation layout and t / duration depend on it."""
+    path = Path(policy)
+    for directory in (path, path.parent):
+        if directory.is_dir() and (directory / "scenario.yaml").is_file() and path.exists():
+            return directory / "scenario.yaml"
+    return "paper"
+
+
 def _scenario_for(args: argparse.Namespace):
-    scenario = resolve_scenario(args.scenario)
+    name = args.scenario
+    if name is None:  # evaluate / render: a model's own scenario, else the paper's
+        name = _model_scenario(getattr(args, "policy", ""))
+    scenario = resolve_scenario(name)
     overrides = {}
     if getattr(args, "observer", None) is not None:
         overrides["observer.enabled"] = args.observer == "on"
@@ -322,8 +336,16 @@ def positive_number(text: str) -> float:
 SCENARIO_HELP = f"registered name ({', '.join(SCENARIOS)}) or path of a YAML scenario"
 
 
-def _add_common(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
+MODEL_SCENARIO_HELP = (
+    f"{SCENARIO_HELP}; None: the scenario.yaml of a saved model's run directory, else paper"
+)
+
+
+def _add_common(parser: argparse.ArgumentParser, model_scenario: bool = False) -> None:
+    if model_scenario:
+        parser.add_argument("--scenario", default=None, help=MODEL_SCENARIO_HELP)
+    else:
+        parser.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
     parser.add_argument(
         "--seeds", type=integer_at_least(1), default=5, help="number of episodes (seeds)"
     )
@@ -388,7 +410,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--observer", choices=["on", "off"], default=None, help="override the scenario's"
     )
     evaluate.add_argument("--out", default="results/eval", help="output directory")
-    _add_common(evaluate)
+    _add_common(evaluate, model_scenario=True)
     evaluate.set_defaults(func=_evaluate)
 
     render = sub.add_parser(
@@ -398,7 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--policy", default="lfpio", help=POLICY_HELP)
     render.add_argument("--algo", default=None, help="SB3 algorithm of a model (None: try each)")
-    render.add_argument("--scenario", default="paper", help=SCENARIO_HELP)
+    render.add_argument("--scenario", default=None, help=MODEL_SCENARIO_HELP)
     render.add_argument("--seed", type=integer_at_least(0), default=0, help="episode seed")
     render.add_argument("--observer", choices=["on", "off"], default=None, help="override")
     render.add_argument("--duration", type=positive_number, default=None, help="episode length [s]")

@@ -136,10 +136,21 @@ class TorchScriptPolicy:
         try:
             self._forward(np.zeros((1, dim), dtype=np.float32))
         except Exception as error:  # noqa: BLE001 - torch raises several kinds on a size mismatch
+            width = self.input_width()
+            takes = "" if width is None else f" (it takes {width})"
             raise ValueError(
-                f"the model {str(self.path)!r} cannot act on observations of {dim} values "
-                f"(scenario {scenario.name!r}, {scenario.n_uav} UAVs): {type(error).__name__}"
+                f"the model {str(self.path)!r} cannot act on observations of {dim} values{takes} "
+                f"(scenario {scenario.name!r}, {scenario.n_uav} UAVs): {type(error).__name__}; "
+                "was it trained on another scenario or observation layout?"
             ) from None
+
+    def input_width(self) -> int | None:
+        """The input width of the module's first weight matrix (its first linear layer, in
+        every exporter of this project), or None if it has none."""
+        for parameter in self.module.parameters():
+            if parameter.ndim == 2:
+                return int(parameter.shape[1])
+        return None
 
     def _forward(self, flat: np.ndarray) -> np.ndarray:
         with self._torch.no_grad():
