@@ -35,7 +35,12 @@ import yaml
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, with_overrides
-from uav_formation_env.evaluation import make_policy, run_episodes, summarise, write_json
+from uav_formation_env.evaluation import (
+    make_policy,
+    run_episode_groups,
+    summarise_groups,
+    write_json,
+)
 from uav_formation_env.policies.registry import POLICY_NAMES, SIMPLE_POLICIES
 
 REFERENCE = "lfpio"  # the policy whose realised cost the ratio column divides by
@@ -86,7 +91,8 @@ def evaluate_policy_name(
     progress: bool = False,
 ) -> dict[str, Any]:
     """Summary (:func:`summarise`, mission metrics included) of one policy (a reference name or a
-    model path) over ``seeds``.
+    model path) over ``seeds``; a scene distribution that draws N flies one batch per N
+    (:func:`~uav_formation_env.evaluation.summarise_groups` joins them).
 
     ``duration`` overrides the scenario's before the policy is built: the DMPC and heuristic read
     the time from the observation's t / duration.
@@ -94,8 +100,10 @@ def evaluate_policy_name(
     if duration is not None:
         scenario = with_overrides(scenario, {"duration": float(duration)})
     policy = make_policy(str(name), scenario, algo=algo)
-    batch = run_episodes(scenario, policy, list(seeds), policy_name=str(name), progress=progress)
-    return summarise(batch)
+    batches = run_episode_groups(
+        scenario, policy, list(seeds), policy_name=str(name), progress=progress
+    )
+    return summarise_groups(batches)
 
 
 def evaluate_run(

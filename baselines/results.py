@@ -38,7 +38,7 @@ from uav_formation_baselines.evaluate import (
     model_path,
     run_scenario,
 )
-from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import mean_ci95, write_json
 
 __all__ = ["algorithm_rows", "run_record", "main"]
@@ -150,10 +150,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=20, help="episodes, seeds seed-start..")
     parser.add_argument("--seed-start", type=int, default=0)
     parser.add_argument("--scenario", default=None, help="default: the first run's")
+    parser.add_argument(
+        "--observation",
+        choices=("full", "local"),
+        default=None,
+        help="override the scenario's observation layout (a local-layout model on random_fields)",
+    )
     parser.add_argument("--compare", nargs="*", default=[REFERENCE], help="reference policies")
     parser.add_argument("--out", default=None, help="output directory")
     args = parser.parse_args(argv)
     scenario = resolve_scenario(args.scenario) if args.scenario else run_scenario(args.runs[0])
+    if args.observation is not None:
+        scenario = with_overrides(scenario, {"observation.kind": args.observation})
     seeds = list(range(args.seed_start, args.seed_start + args.seeds))
     grouped: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]] = {}
     summaries: dict[str, dict[str, Any]] = {}
