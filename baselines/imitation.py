@@ -64,6 +64,11 @@ class ImitationConfig:
             seeds the exact teacher's realised J was 7.270e5 at 0 and 7.278e5 at 10.
         rounds: data-gathering rounds (round 0 the teacher's own episodes) [-].
         episodes: episodes flown per round [-].
+        start_episodes: extra episodes per round cut at ``start_duration``: more start
+            geometries (UAVs converging from the start box into formation, where a clone's
+            errors become collisions) for the price of a few full episodes. Needs the time slot
+            masked (``masked_slots``), since t / duration means another time in them [-].
+        start_duration: length of those episodes [s].
         beta: the teacher executes with probability ``beta ** r`` in round r [-].
         duration: episode length [s] (None: the scenario's).
         hidden: hidden layer widths of the MLP.
@@ -87,6 +92,8 @@ class ImitationConfig:
     teacher_threshold: float = 0.0
     rounds: int = 6
     episodes: int = 16
+    start_episodes: int = 0
+    start_duration: float = 20.0
     beta: float = 0.5
     duration: float | None = None
     hidden: tuple[int, ...] = (256, 256)
@@ -106,6 +113,14 @@ class ImitationConfig:
             raise ValueError(
                 f"teacher must be one of {list(DMPC_OPTIMIZERS)}, got {self.teacher!r}"
             )
+        if (
+            isinstance(self.start_episodes, bool)
+            or not isinstance(self.start_episodes, int)
+            or (self.start_episodes < 0)
+        ):
+            raise ValueError(f"start_episodes must be an integer >= 0, got {self.start_episodes!r}")
+        if not self.start_duration > 0:
+            raise ValueError(f"start_duration must be > 0 [s], got {self.start_duration!r}")
         for name in ("rounds", "episodes", "epochs", "batch_size", "validation_seeds"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
@@ -283,27 +298,31 @@ def train_imitation(
     model: NormalisedMLP | None = None
     learner = None
     rows: list[dict[str, Any]] = []
+    short = with_overrides(scen, {"duration": float(config.start_duration)})
     for r in range(config.rounds):
-        first = config.seed_start + seed * 100_000 + r * config.episodes
-        seeds = list(range(first, first + config.episodes))
-        obs, actions, nearest = collect(
-            scen,
-            config.teacher,
-            seeds,
-            config.teacher_threshold,
-            learner,
-            config.beta**r if r else 1.0,
-            mix_seed=seed * 1000 + r,
-        )
-        all_obs.append(obs)
-        all_actions.append(actions)
-        close = nearest < scen.cost.separation_distance
-        all_weights.append(np.where(close, config.proximity_weight, 1.0))
+        base = config.seed_start + seed * 100_000
+        parts = [(scen, base + r * config.episodes, config.episodes)]
+        if config.start_episodes:  # seeds of their own, apart from the full episodes'
+            parts.append((short, base + 50_000 + r * config.start_episodes, config.start_episodes))
+        for part, (flown, first, count) in enumerate(parts):
+            obs, actions, nearest = collect(
+                flown,
+                config.teacher,
+                list(range(first, first + count)),
+                config.teacher_threshold,
+                learner,
+                config.beta**r if r else 1.0,
+                mix_seed=seed * 1000 + 10 * r + part,
+            )
+            all_obs.append(obs)
+            all_actions.append(actions)
+            close = nearest < scen.cost.separation_distance
+            all_weights.append(np.where(close, config.proximity_weight, 1.0))
         data_obs, data_actions = np.concatenate(all_obs), np.concatenate(all_actions)
         if model is None:  # normalise by the teacher's own state distribution, fixed afterwards
             model = NormalisedMLP(
-                obs.mean(axis=0),
-                obs.std(axis=0),
+                data_obs.mean(axis=0),
+                data_obs.std(axis=0),
                 config.hidden,
                 config.activation,
                 masked_slots=config.masked_slots,

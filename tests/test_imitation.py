@@ -203,3 +203,20 @@ def test_cli_evaluate_flies_a_model_on_its_own_scenario(tmp_path: Path, capsys) 
     # the paper's own scenario (full layout, 47 values) cannot feed the 95-value local model
     assert cli_main([*argv, "--scenario", "paper", "--out", str(out)]) != 0
     assert "95" in capsys.readouterr().err
+
+
+def test_start_episodes_add_short_episodes_of_their_own_seeds(tmp_path: Path) -> None:
+    config = ImitationConfig(
+        rounds=1,
+        episodes=1,
+        start_episodes=2,
+        start_duration=0.4,
+        epochs=1,
+        validation_seeds=1,
+        hidden=(8,),
+        duration=2.0,
+    )
+    record = train_imitation("paper", tmp_path, config, progress=False)
+    assert record["agent_steps"] == (10 + 2 * 2) * 5  # one 10-step and two 2-step episodes
+    with pytest.raises(ValueError, match="start_episodes must be an integer >= 0"):
+        ImitationConfig(start_episodes=-1)
