@@ -8,7 +8,7 @@ mean action (3, normalised, clipped to [-1, 1] by the reader) and a log standard
 installed.
 
 :class:`NormalisedMLP` is the network behaviour cloning trains and exports; :func:`save_policy`
-scripts and saves any module of that contract, and checks that the saved file gives the same
+traces and saves any module of that contract, and checks that the saved file gives the same
 numbers as the module on sample observations.
 """
 
@@ -91,7 +91,7 @@ class NormalisedMLP(nn.Module):
 
 
 def save_policy(module: nn.Module, path: str | Path, sample: np.ndarray) -> Path:
-    """Script ``module`` and save it as ``path``; return the path.
+    """Trace ``module`` as TorchScript and save it as ``path``; return the path.
 
     Args:
         module: (M, dim) float32 -> (M, 6) (mean action, log-std).
@@ -102,13 +102,17 @@ def save_policy(module: nn.Module, path: str | Path, sample: np.ndarray) -> Path
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     module = module.eval()
-    scripted = torch.jit.script(module)
-    scripted.save(str(path))
-    loaded = torch.jit.load(str(path), map_location="cpu")
     obs = torch.as_tensor(np.asarray(sample, dtype=np.float32))
+    # traced, not scripted: scripting re-reads the module's source file, so a run that exports
+    # while its source is being edited fails (seen: a 5-minute BenchMARL run lost at export)
     with torch.no_grad():
-        want, got = module(obs), loaded(obs)
-    if got.shape != (obs.shape[0], 6):
+        traced = torch.jit.trace(module, obs)
+    traced.save(str(path))
+    loaded = torch.jit.load(str(path), map_location="cpu")
+    check = torch.cat([obs, obs[:1] * 2.0 + 1.0])  # another batch size and other values
+    with torch.no_grad():
+        want, got = module(check), loaded(check)
+    if got.shape != (check.shape[0], 6):
         raise RuntimeError(f"the exported policy returns {tuple(got.shape)}, expected (M, 6)")
     difference = float((want - got).abs().max())
     if difference > 1e-6:

@@ -107,23 +107,26 @@ print("paper's events [s]:", PAPER_EVENTS_S)"""
 
 RL_VS_REFERENCE = [
     new_markdown_cell(
-        "# 02 · RL baselines against the reference policy: cost *and* mission\n\n"
-        "The shipped PPO and SAC models (`baselines/models/`, trained with "
-        "`python -m uav_formation_baselines.train`; one policy shared by every UAV) are "
-        "evaluated with the same code and seeds as the LFPIO distributed-MPC reference, PIO, "
-        "the consensus heuristic and random actions: `uav_formation_env.evaluation.make_policy`, "
-        "`run_episodes` and `summarise`, which is what `uav-formation evaluate` and "
-        "`python -m uav_formation_baselines.evaluate` run.\n\n"
+        "# 02 · Learned baselines against the reference policy: cost *and* mission\n\n"
+        "The shipped models (`baselines/models/`; one policy shared by every UAV): DAgger, an "
+        "MLP cloned from the exact best-response DMPC (`python -m "
+        "uav_formation_baselines.imitation`), and the PPO and SAC models trained on the game "
+        "cost (`python -m uav_formation_baselines.train`). They fly the same seeds through the "
+        "same code as the LFPIO distributed-MPC reference, PIO, the consensus heuristic and "
+        "random actions: `uav_formation_env.evaluation.make_policy`, `run_episodes` and "
+        "`summarise`, which is what `uav-formation evaluate` and "
+        "`python -m uav_formation_baselines.evaluate` run. Each model flies the scenario of its "
+        "run directory (`scenario.yaml`: the DAgger model reads the N-independent local "
+        "observation); the physics, the seeds and so the episodes' scenes are the paper's.\n\n"
         "The paper's game cost J_i tracks the preset **velocity**, not a position, so a low "
         "cost does not mean the mission was flown. The table puts the realised cost beside the "
         'mission metrics of `summarise(batch)["mission"]`: missions completed, route error of '
         "the formation centroid against the preset route, obstacles met and collisions after "
-        "t = 0. The shipped models were trained on the cost alone; they are kept as negative "
-        "examples (see `baselines/RESULTS.md`).\n\n"
-        "Full size: 20 seeds of the full 200 s, the seeds of `baselines/RESULTS.md` (about two "
-        "minutes on two cores). With `UAV_NOTEBOOK_SIZE=small` the episodes last 30 s and 2 "
-        "seeds (CI only: the models were trained on 200 s episodes and the obstacles come later, "
-        "so those numbers say nothing about the mission)."
+        "t = 0 (see `baselines/RESULTS.md` for every algorithm over three training seeds).\n\n"
+        "Full size: 20 seeds of the full 200 s, the held-out seeds of `baselines/RESULTS.md` "
+        "(a few minutes on two cores). With `UAV_NOTEBOOK_SIZE=small` the episodes last 30 s "
+        "and 2 seeds (CI only: the obstacles come later, so those numbers say nothing about the "
+        "mission)."
     ),
     new_code_cell(SIZE_CELL),
     new_code_cell(
@@ -138,21 +141,27 @@ from uav_formation_env.evaluation import make_policy, preset_route, run_episodes
 from uav_formation_env.plotting import draw_obstacles
 
 seeds = list(range(2)) if SMALL else list(range(20))
-scenario = resolve_scenario("paper")
-if SMALL:
-    scenario = with_overrides(scenario, {"duration": 30.0})
-policies = {}
-for algo in ("ppo", "sac"):
-    model = MODELS_DIR / f"paper_{algo}" / "model.zip"
-    if model.is_file():
-        policies[algo.upper()] = str(model)
-policies.update({"lfpio": "lfpio", "pio": "pio", "heuristic": "heuristic", "random": "random"})
-print(policies)"""
+
+
+def short(scenario):
+    return with_overrides(scenario, {"duration": 30.0}) if SMALL else scenario
+
+
+scenario = short(resolve_scenario("paper"))
+policies = {}  # label -> (policy name or model path, the scenario it flies)
+for run, label in (("paper_dagger", "DAgger"), ("paper_ppo", "PPO"), ("paper_sac", "SAC")):
+    directory = MODELS_DIR / run
+    model = directory / "policy.pt" if (directory / "policy.pt").is_file() else directory / "model.zip"
+    if model.is_file():  # a model flies the scenario (observation layout) it was trained on
+        policies[label] = (str(model), short(resolve_scenario(directory / "scenario.yaml")))
+for name in ("lfpio", "pio", "heuristic", "random"):
+    policies[name] = (name, scenario)
+print({label: name for label, (name, _) in policies.items()})"""
     ),
     new_code_cell(
         """batches, summaries = {}, {}
-for label, name in policies.items():
-    batch = run_episodes(scenario, make_policy(name, scenario), seeds, policy_name=label)
+for label, (name, flown) in policies.items():
+    batch = run_episodes(flown, make_policy(name, flown), seeds, policy_name=label)
     batches[label], summaries[label] = batch, summarise(batch)"""
     ),
     new_markdown_cell(
