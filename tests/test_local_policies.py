@@ -148,6 +148,9 @@ def test_random_swarm_runs_grouped_by_drawn_n():
     per_seed = [c for b in batches for c in b.stage_cost.sum(axis=0).mean(axis=1)]
     np.testing.assert_allclose(summary["realised_cost_per_seed"], per_seed)
     assert set(summary["groups"]) == {str(n) for n in drawn.values()}
+    n_steps = batches[0].n_steps
+    policy_seconds = sum(b.policy_seconds.sum() for b in batches)
+    assert summary["policy_time_per_step_s"] == pytest.approx(policy_seconds / n_steps)
 
 
 def test_a_seed_flies_the_same_alone_and_in_its_group():

@@ -202,6 +202,10 @@ def summarise_groups(batches: list[EpisodeBatch]) -> dict[str, Any]:
         "collisions_per_seed": joined("collisions_per_seed"),
         "seconds_per_batch": seconds,
         "seconds_per_episode": seconds / len(seeds),
+        # one control step of every seed: the groups' batched calls one after the other
+        "policy_time_per_step_s": sum(float(b.policy_seconds.sum()) for b in batches)
+        / first.n_steps,
+        "wall_time_per_step_s": seconds / first.n_steps,
         "groups": {str(batch.z.shape[2]): part for batch, part in zip(batches, parts)},
     }
 
