@@ -64,11 +64,11 @@ class ImitationConfig:
             seeds the exact teacher's realised J was 7.270e5 at 0 and 7.278e5 at 10.
         rounds: data-gathering rounds (round 0 the teacher's own episodes) [-].
         episodes: episodes flown per round [-].
-        start_episodes: extra episodes per round cut at ``start_duration``: more start
-            geometries (UAVs converging from the start box into formation, where a clone's
-            errors become collisions) for the price of a few full episodes. Needs the time slot
-            masked (``masked_slots``), since t / duration means another time in them [-].
-        start_duration: length of those episodes [s].
+        start_episodes: extra episodes per round flown only for their first
+            ``start_duration``: more start geometries (UAVs converging from the start box into
+            formation, where a clone's errors become collisions) for the price of a few full
+            episodes [-].
+        start_duration: how long those episodes are flown [s].
         beta: the teacher executes with probability ``beta ** r`` in round r [-].
         duration: episode length [s] (None: the scenario's).
         hidden: hidden layer widths of the MLP.
@@ -179,6 +179,7 @@ def collect(
     learner: Any | None = None,
     teacher_probability: float = 1.0,
     mix_seed: int = 0,
+    n_steps: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fly one episode per seed and label every UAV-step with the teacher's action.
 
@@ -191,6 +192,7 @@ def collect(
         teacher_probability: chance that a copy executes the teacher's action at a step (the
             learner's otherwise).
         mix_seed: seed of the coin flips.
+        n_steps: control steps flown per episode (None: the whole episode).
 
     Returns:
         ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m])`` over every copy, UAV
@@ -204,7 +206,7 @@ def collect(
         teacher.reset(len(group), seeds=group)
         step = episodes.reset(seed=group)
         links = getattr(teacher, "needs_neighbour_index", False)
-        for _ in range(scenario.n_steps):
+        for _ in range(scenario.n_steps if n_steps is None else min(n_steps, scenario.n_steps)):
             obs = step.observation
             label = (
                 teacher.act_batch(obs, step.neighbour_index) if links else teacher.act_batch(obs)
@@ -298,21 +300,24 @@ def train_imitation(
     model: NormalisedMLP | None = None
     learner = None
     rows: list[dict[str, Any]] = []
-    short = with_overrides(scen, {"duration": float(config.start_duration)})
+    start_steps = max(1, round(config.start_duration / scen.dynamics.dt))
     for r in range(config.rounds):
         base = config.seed_start + seed * 100_000
-        parts = [(scen, base + r * config.episodes, config.episodes)]
+        parts = [(None, base + r * config.episodes, config.episodes)]
         if config.start_episodes:  # seeds of their own, apart from the full episodes'
-            parts.append((short, base + 50_000 + r * config.start_episodes, config.start_episodes))
-        for part, (flown, first, count) in enumerate(parts):
+            parts.append(
+                (start_steps, base + 50_000 + r * config.start_episodes, config.start_episodes)
+            )
+        for part, (steps, first, count) in enumerate(parts):
             obs, actions, nearest = collect(
-                flown,
+                scen,
                 config.teacher,
                 list(range(first, first + count)),
                 config.teacher_threshold,
                 learner,
                 config.beta**r if r else 1.0,
                 mix_seed=seed * 1000 + 10 * r + part,
+                n_steps=steps,
             )
             all_obs.append(obs)
             all_actions.append(actions)
