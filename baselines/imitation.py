@@ -49,7 +49,7 @@ from uav_formation_env.policies import DMPC_OPTIMIZERS, make_policy
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
 from uav_formation_env.scenes import seeds_by_n_uav
 
-__all__ = ["ImitationConfig", "collect", "load_config", "train_imitation"]
+__all__ = ["ImitationConfig", "collect", "load_config", "sample_weights", "train_imitation"]
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,9 @@ class ImitationConfig:
             separation distance d_s (``cost.separation_distance``, where the teacher's
             separation term acts) [-]; 1 weighs every step alike. Those steps are rare (the
             start transient) and are where a clone's small errors become collisions.
+        obstacle_margin: the steps of a UAV nearer than this to an obstacle's surface are
+            weighted ``proximity_weight`` too (0: only the UAV-UAV rule) [m]. Clones that
+            failed a mission by a step inside an obstacle grazed it while avoiding.
         validation_seeds: validation episodes per round [-].
         seed_start, validation_seed_start: first training / validation episode seed.
         overrides: scenario field overrides (e.g. ``{observation: {kind: local}}``).
@@ -103,6 +106,7 @@ class ImitationConfig:
     learning_rate: float = 1e-3
     masked_slots: tuple[int, ...] = ()
     proximity_weight: float = 1.0
+    obstacle_margin: float = 0.0
     validation_seeds: int = 4
     seed_start: int = 10_000
     validation_seed_start: int = 5_000
@@ -135,6 +139,8 @@ class ImitationConfig:
             raise ValueError(f"beta must lie in [0, 1], got {self.beta!r}")
         if not self.proximity_weight >= 1.0:
             raise ValueError(f"proximity_weight must be >= 1, got {self.proximity_weight!r}")
+        if not self.obstacle_margin >= 0:
+            raise ValueError(f"obstacle_margin must be >= 0 [m], got {self.obstacle_margin!r}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
         if self.duration is not None and not self.duration > 0:
@@ -180,7 +186,7 @@ def collect(
     teacher_probability: float = 1.0,
     mix_seed: int = 0,
     n_steps: int | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, ...]:
     """Fly one episode per seed and label every UAV-step with the teacher's action.
 
     Args:
@@ -195,11 +201,12 @@ def collect(
         n_steps: control steps flown per episode (None: the whole episode).
 
     Returns:
-        ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m])`` over every copy, UAV
-        and step; ``nearest`` is the distance from the UAV to its nearest other UAV.
+        ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m], clearance (M,) [m])``
+        over every copy, UAV and step; ``nearest`` is the distance from the UAV to its nearest
+        other UAV, ``clearance`` to the nearest obstacle surface (inf without obstacles).
     """
     coins = np.random.default_rng(mix_seed)
-    observations, labels, nearest = [], [], []
+    observations, labels, nearest, clearance = [], [], [], []
     for n_uav, group in seeds_by_n_uav(scenario, seeds).items():
         episodes = FormationEpisodes(scenario, len(group), fly_on_after_collision=True, n_uav=n_uav)
         teacher = NashDMPCPolicy(scenario, teacher_name, threshold=teacher_threshold)
@@ -214,13 +221,24 @@ def collect(
             observations.append(obs.reshape(-1, obs.shape[-1]))
             labels.append(np.asarray(label, dtype=np.float32).reshape(-1, 3))
             nearest.append(np.asarray(step.result.min_separation, dtype=float).reshape(-1))
+            clearance.append(np.asarray(step.result.obstacle_distance, dtype=float).reshape(-1))
             action = label
             if learner is not None and teacher_probability < 1.0:
                 own = np.asarray(learner.act_batch(obs), dtype=float)
                 use_teacher = coins.random(len(group)) < teacher_probability
                 action = np.where(use_teacher[:, None, None], label, own)
             step = episodes.step(action)
-    return np.concatenate(observations), np.concatenate(labels), np.concatenate(nearest)
+    return tuple(np.concatenate(part) for part in (observations, labels, nearest, clearance))
+
+
+def sample_weights(
+    nearest: np.ndarray, clearance: np.ndarray, scenario: Scenario, config: ImitationConfig
+) -> np.ndarray:
+    """(M,) loss weights: ``config.proximity_weight`` where another UAV is nearer than the
+    separation distance d_s or an obstacle's surface nearer than ``config.obstacle_margin``,
+    else 1."""
+    close = (nearest < scenario.cost.separation_distance) | (clearance < config.obstacle_margin)
+    return np.where(close, config.proximity_weight, 1.0)
 
 
 def fit(
@@ -309,7 +327,7 @@ def train_imitation(
                 (start_steps, base + 50_000 + r * config.start_episodes, config.start_episodes)
             )
         for part, (steps, first, count) in enumerate(parts):
-            obs, actions, nearest = collect(
+            obs, actions, nearest, clearance = collect(
                 scen,
                 config.teacher,
                 list(range(first, first + count)),
@@ -321,8 +339,7 @@ def train_imitation(
             )
             all_obs.append(obs)
             all_actions.append(actions)
-            close = nearest < scen.cost.separation_distance
-            all_weights.append(np.where(close, config.proximity_weight, 1.0))
+            all_weights.append(sample_weights(nearest, clearance, scen, config))
         data_obs, data_actions = np.concatenate(all_obs), np.concatenate(all_actions)
         if model is None:  # normalise by the teacher's own state distribution, fixed afterwards
             model = NormalisedMLP(

@@ -16,6 +16,7 @@ from uav_formation_baselines.imitation import (  # noqa: E402
     fit,
     load_config,
     main,
+    sample_weights,
     train_imitation,
 )
 from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
@@ -49,8 +50,8 @@ def test_config_rejects_unknown_and_bad_values(tmp_path: Path) -> None:
 
 
 def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
-    obs, labels, nearest = collect(SHORT, "exact", [3, 4])
-    assert nearest.shape == (10 * 2 * 5,) and nearest.min() > 0
+    obs, labels, nearest, clearance = collect(SHORT, "exact", [3, 4])
+    assert nearest.shape == clearance.shape == (10 * 2 * 5,) and nearest.min() > 0
     assert obs.shape == (10 * 2 * 5, 47) and labels.shape == (10 * 2 * 5, 3)
     # the same teacher, flown on its own, sees the same observations and acts the same
     episodes = FormationEpisodes(SHORT, 2, fly_on_after_collision=True)
@@ -63,11 +64,12 @@ def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
         np.testing.assert_array_equal(obs[rows], step.observation.reshape(10, 47))
         np.testing.assert_allclose(labels[rows], action.reshape(10, 3), atol=1e-6)
         np.testing.assert_array_equal(nearest[rows], step.result.min_separation.reshape(10))
+        np.testing.assert_array_equal(clearance[rows], step.result.obstacle_distance.reshape(10))
         step = episodes.step(action)
 
 
 def test_learner_rollout_follows_the_learner_and_is_labelled_by_the_teacher() -> None:
-    obs, labels, _ = collect(SHORT, "exact", [3], learner=ZeroPolicy(), teacher_probability=0.0)
+    obs, labels, _, _ = collect(SHORT, "exact", [3], learner=ZeroPolicy(), teacher_probability=0.0)
     episodes = FormationEpisodes(SHORT, 1, fly_on_after_collision=True)
     step = episodes.reset(seed=[3])
     for k in range(3):
@@ -108,6 +110,17 @@ def test_fit_learns_a_feedback_law() -> None:
     config = ImitationConfig(epochs=30, batch_size=256, learning_rate=3e-3)
     after = fit(model, obs, target, config, seed=0)
     assert after < before / 10
+
+
+def test_sample_weights_mark_close_uavs_and_obstacles() -> None:
+    nearest = np.array([5.0, 15.0, 15.0, 15.0])  # d_s = 10 m
+    clearance = np.array([50.0, 50.0, 3.0, np.inf])
+    config = ImitationConfig(proximity_weight=20.0, obstacle_margin=5.0)
+    np.testing.assert_array_equal(
+        sample_weights(nearest, clearance, SHORT, config), [20.0, 1.0, 20.0, 1.0]
+    )
+    off = ImitationConfig(proximity_weight=20.0)  # margin 0: only UAVs count
+    np.testing.assert_array_equal(sample_weights(nearest, clearance, SHORT, off), [20, 1, 1, 1])
 
 
 def test_fit_weights_decide_between_contradicting_labels() -> None:
