@@ -4,8 +4,11 @@
         --seeds 20 --compare lfpio pio exact nash --out baselines/eval_results/paper_learned
 
 Every run directory (DAgger, BenchMARL, SB3 or RLlib recipe) is flown deterministically on the
-same held-out seeds by the project's runner (:func:`uav_formation_baselines.evaluate.
-evaluate_policy_name`, as ``uav-formation evaluate``), and its runs are grouped by the algorithm
+same held-out seeds of one scenario (``--scenario``, else the first run's), each model through the
+observation layout of its own ``scenario.yaml`` (the training options there, reward transforms
+and corridors, are not applied: evaluation flies the scenario as it is), by the project's runner
+(:func:`uav_formation_baselines.evaluate.evaluate_policy_name`, as ``uav-formation evaluate``),
+and its runs are grouped by the algorithm
 named in their ``config.yaml`` (``algorithm:`` or SB3's ``algo:``). An algorithm's row holds,
 over its training seeds, the mean and 95 % confidence half-width (Student t, one value per
 training seed: that run's mean over the evaluation seeds) of the realised J per UAV, route error
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import shlex
 import sys
 from pathlib import Path
@@ -167,7 +171,11 @@ def main(argv: list[str] | None = None) -> int:
     summaries: dict[str, dict[str, Any]] = {}
     for run in args.runs:
         record = run_record(run)
-        summary = evaluate_policy_name(str(model_path(run)), scenario, seeds)
+        # the evaluation's scenario, read through the observation layout the model was trained on
+        flown = dataclasses.replace(scenario, observation=run_scenario(run).observation)
+        if args.observation is not None:
+            flown = scenario
+        summary = evaluate_policy_name(str(model_path(run)), flown, seeds)
         grouped.setdefault(record["algorithm"], []).append((record, summary))
         summaries[str(run)] = summary
         print(f"{run}: {summary['mission']['completed']}/{len(seeds)} completed", file=sys.stderr)

@@ -233,3 +233,24 @@ def test_start_episodes_add_short_episodes_of_their_own_seeds(tmp_path: Path) ->
     assert record["agent_steps"] == (10 + 2 * 2) * 5  # one 10-step and two 2-step episodes
     with pytest.raises(ValueError, match="start_episodes must be an integer >= 0"):
         ImitationConfig(start_episodes=-1)
+
+
+def test_results_fly_each_model_through_its_own_observation_layout(tmp_path: Path) -> None:
+    from uav_formation_baselines.results import main as results_main
+
+    config = ImitationConfig(
+        rounds=1,
+        episodes=1,
+        epochs=1,
+        validation_seeds=1,
+        hidden=(8,),
+        duration=2.0,
+        overrides={"observation": {"kind": "local"}},
+    )
+    train_imitation("paper", tmp_path / "run", config, progress=False)
+    scenario = tmp_path / "paper_2s.yaml"  # the paper's physics and its full layout
+    from uav_formation_env.config_io import save_scenario
+
+    save_scenario(SHORT, scenario)
+    argv = [str(tmp_path / "run"), "--scenario", str(scenario), "--seeds", "1", "--compare"]
+    assert results_main([*argv, "--out", str(tmp_path / "out")]) == 0  # 95 values, not 47
