@@ -112,6 +112,11 @@ def algorithm_rows(
     return rows
 
 
+def _ratio(x: float) -> str:
+    """A cost ratio: two decimals near 1, three significant digits far from it (8.98e5x)."""
+    return f"{x:.2f}x" if x < 100 else f"{x:.3g}x".replace("e+0", "e").replace("e+", "e")
+
+
 def _pm(row: dict[str, Any], key: str, digits: int) -> str:
     return f"{row[key]:.{digits}f} ± {row[f'{key}_ci95']:.{digits}f}"
 
@@ -134,7 +139,7 @@ def format_markdown(rows: list[dict[str, Any]]) -> str:
         steps = row["agent_steps_per_run"]
         lines.append(
             f"| {row['policy']} | {row['training_seeds'] or '-'} | {cost} | "
-            f"{'-' if ratio is None else f'{ratio:.2f}x'} | {row['completed']}/{row['episodes']} "
+            f"{'-' if ratio is None else _ratio(ratio)} | {row['completed']}/{row['episodes']} "
             f"({per_run}) | {_pm(row, 'route_error_max_m', 1)} | {_pm(row, 'route_error_rms_m', 1)}"
             f" | {_pm(row, 'velocity_rmse_mps', 2)} | {met} | {row['collisions_after_start']} | "
             f"{row['min_separation_after_start_m']:.2f} | "
