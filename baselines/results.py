@@ -62,6 +62,43 @@ def run_record(run: str | Path) -> dict[str, Any]:
     return {**config, "algorithm": str(algorithm), "agent_steps": steps}
 
 
+def _row(
+    label: str,
+    per_run: list[dict[str, Any]],
+    records: list[dict[str, Any]] | None,
+    reference_cost: float | None,
+) -> dict[str, Any]:
+    """One table row from :func:`comparison_row` rows: over training runs (``records`` given:
+    mean and 95 % half-width over the runs, counts summed) or of one reference policy
+    (``records`` None: its own interval over the evaluation seeds)."""
+    row: dict[str, Any] = {
+        "policy": label,
+        "training_seeds": None if records is None else len(per_run),
+    }
+    for key in MEASURES:
+        if records is None:
+            ci_key = "realised_cost_ci95" if key == "realised_cost_mean" else f"{key}_ci95"
+            row[key], row[f"{key}_ci95"] = per_run[0][key], per_run[0][ci_key]
+        else:
+            row[key], row[f"{key}_ci95"] = mean_ci95(np.array([r[key] for r in per_run]))
+    mean_cost = row["realised_cost_mean"]
+    row["cost_ratio_to_reference"] = mean_cost / reference_cost if reference_cost else None
+    row["completed"] = sum(r["completed"] for r in per_run)
+    row["episodes"] = sum(r["episodes"] for r in per_run)
+    row["completed_per_run"] = [r["completed"] for r in per_run]
+    row["collisions_after_start"] = sum(r["collisions_after_start"] for r in per_run)
+    row["min_separation_after_start_m"] = min(r["min_separation_after_start_m"] for r in per_run)
+    obstacles = [k[:-4] for k in per_run[0] if k.endswith("_met")]
+    row["obstacles_met"] = {o: sum(r[f"{o}_met"] for r in per_run) for o in obstacles}
+    for key, source in (
+        ("wall_time_s_per_run", "wall_time_s"),
+        ("agent_steps_per_run", "agent_steps"),
+    ):
+        values = [rec.get(source) or np.nan for rec in records] if records else None
+        row[key] = None if values is None else float(np.mean(values))
+    return row
+
+
 def algorithm_rows(
     runs: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]],
     references: dict[str, dict[str, Any]],
@@ -73,42 +110,9 @@ def algorithm_rows(
     rows = []
     for algorithm, pairs in runs.items():
         per_run = [comparison_row(algorithm, summary, ref_cost) for _, summary in pairs]
-        row: dict[str, Any] = {"policy": algorithm, "training_seeds": len(pairs)}
-        for key in MEASURES:
-            mean, half = mean_ci95(np.array([r[key] for r in per_run]))
-            row[key], row[f"{key}_ci95"] = mean, half
-        row["cost_ratio_to_reference"] = row["realised_cost_mean"] / ref_cost if ref_cost else None
-        row["completed"] = sum(r["completed"] for r in per_run)
-        row["episodes"] = sum(r["episodes"] for r in per_run)
-        row["completed_per_run"] = [r["completed"] for r in per_run]
-        row["collisions_after_start"] = sum(r["collisions_after_start"] for r in per_run)
-        row["min_separation_after_start_m"] = min(
-            r["min_separation_after_start_m"] for r in per_run
-        )
-        obstacles = [k[:-4] for k in per_run[0] if k.endswith("_met")]
-        row["obstacles_met"] = {o: sum(r[f"{o}_met"] for r in per_run) for o in obstacles}
-        row["wall_time_s_per_run"] = float(
-            np.mean([rec.get("wall_time_s") or np.nan for rec, _ in pairs])
-        )
-        row["agent_steps_per_run"] = float(
-            np.mean([rec.get("agent_steps") or np.nan for rec, _ in pairs])
-        )
-        rows.append(row)
+        rows.append(_row(algorithm, per_run, [record for record, _ in pairs], ref_cost))
     for name, summary in references.items():
-        single = comparison_row(name, summary, ref_cost)
-        row = {"policy": name, "training_seeds": None}
-        for key in MEASURES:
-            ci_key = "realised_cost_ci95" if key == "realised_cost_mean" else f"{key}_ci95"
-            row[key], row[f"{key}_ci95"] = single[key], single[ci_key]
-        row["cost_ratio_to_reference"] = single["cost_ratio_to_reference"]
-        row["completed"], row["episodes"] = single["completed"], single["episodes"]
-        row["completed_per_run"] = [single["completed"]]
-        row["collisions_after_start"] = single["collisions_after_start"]
-        row["min_separation_after_start_m"] = single["min_separation_after_start_m"]
-        obstacles = [k[:-4] for k in single if k.endswith("_met")]
-        row["obstacles_met"] = {o: single[f"{o}_met"] for o in obstacles}
-        row["wall_time_s_per_run"] = row["agent_steps_per_run"] = None
-        rows.append(row)
+        rows.append(_row(name, [comparison_row(name, summary, ref_cost)], None, ref_cost))
     return rows
 
 
