@@ -28,6 +28,13 @@ from uav_formation_env.policies.dmpc import NashDMPCPolicy  # noqa: E402
 SHORT = with_overrides(resolve_scenario("paper"), {"duration": 2.0})  # 10 steps
 
 
+def tiny_config(**settings) -> ImitationConfig:
+    """A DAgger run of seconds: 2 s episodes (10 steps), one epoch, an 8-unit layer."""
+    return ImitationConfig(
+        **{"epochs": 1, "validation_seeds": 1, "hidden": (8,), "duration": 2.0, **settings}
+    )
+
+
 class ZeroPolicy:
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         return np.zeros((*obs.shape[:2], 3))
@@ -142,15 +149,7 @@ def test_fit_weights_decide_between_contradicting_labels() -> None:
 
 
 def test_train_writes_a_loadable_policy(tmp_path: Path) -> None:
-    config = ImitationConfig(
-        rounds=2,
-        episodes=1,
-        epochs=1,
-        validation_seeds=1,
-        hidden=(8,),
-        duration=2.0,
-        masked_slots=(12,),
-    )
+    config = tiny_config(rounds=2, episodes=1, masked_slots=(12,))
     record = train_imitation("paper", tmp_path, config, seed=0, progress=False)
     assert record["agent_steps"] == 2 * 10 * 5
     rows = (tmp_path / "rounds.csv").read_text().strip().splitlines()
@@ -171,9 +170,7 @@ def test_results_table_aggregates_runs_over_training_seeds(tmp_path: Path) -> No
 
     from uav_formation_baselines.results import main as results_main
 
-    config = ImitationConfig(
-        rounds=1, episodes=1, epochs=1, validation_seeds=1, hidden=(8,), duration=2.0
-    )
+    config = tiny_config(rounds=1, episodes=1)
     runs = [tmp_path / f"run{seed}" for seed in (0, 1)]
     for seed, run in enumerate(runs):
         train_imitation("paper", run, config, seed=seed, progress=False)
@@ -199,15 +196,7 @@ def test_results_table_aggregates_runs_over_training_seeds(tmp_path: Path) -> No
 def test_cli_evaluate_flies_a_model_on_its_own_scenario(tmp_path: Path, capsys) -> None:
     from uav_formation_env.cli import main as cli_main
 
-    config = ImitationConfig(
-        rounds=1,
-        episodes=1,
-        epochs=1,
-        validation_seeds=1,
-        hidden=(8,),
-        duration=2.0,
-        overrides={"observation": {"kind": "local"}},
-    )
+    config = tiny_config(rounds=1, episodes=1, overrides={"observation": {"kind": "local"}})
     train_imitation("paper", tmp_path / "run", config, progress=False)
     out = tmp_path / "eval"
     argv = ["evaluate", "--policy", str(tmp_path / "run"), "--seeds", "2", "--quiet"]
@@ -219,16 +208,7 @@ def test_cli_evaluate_flies_a_model_on_its_own_scenario(tmp_path: Path, capsys) 
 
 
 def test_start_episodes_add_short_episodes_of_their_own_seeds(tmp_path: Path) -> None:
-    config = ImitationConfig(
-        rounds=1,
-        episodes=1,
-        start_episodes=2,
-        start_duration=0.4,
-        epochs=1,
-        validation_seeds=1,
-        hidden=(8,),
-        duration=2.0,
-    )
+    config = tiny_config(rounds=1, episodes=1, start_episodes=2, start_duration=0.4)
     record = train_imitation("paper", tmp_path, config, progress=False)
     assert record["agent_steps"] == (10 + 2 * 2) * 5  # one 10-step and two 2-step episodes
     with pytest.raises(ValueError, match="start_episodes must be an integer >= 0"):
@@ -238,15 +218,7 @@ def test_start_episodes_add_short_episodes_of_their_own_seeds(tmp_path: Path) ->
 def test_results_fly_each_model_through_its_own_observation_layout(tmp_path: Path) -> None:
     from uav_formation_baselines.results import main as results_main
 
-    config = ImitationConfig(
-        rounds=1,
-        episodes=1,
-        epochs=1,
-        validation_seeds=1,
-        hidden=(8,),
-        duration=2.0,
-        overrides={"observation": {"kind": "local"}},
-    )
+    config = tiny_config(rounds=1, episodes=1, overrides={"observation": {"kind": "local"}})
     train_imitation("paper", tmp_path / "run", config, progress=False)
     scenario = tmp_path / "paper_2s.yaml"  # the paper's physics and its full layout
     from uav_formation_env.config_io import save_scenario
