@@ -44,8 +44,10 @@ __all__ = [
     "asarray_like",
     "backend_device",
     "clip_in_place",
+    "concat_into",
     "constant_like",
     "copy",
+    "copy_where",
     "device",
     "einsum",
     "einsum_function",
@@ -55,6 +57,7 @@ __all__ = [
     "move_batch_first",
     "move_batch_last",
     "namespace",
+    "nan_to_inf",
     "namespace_of",
     "namespace_of_backend",
     "subtract_into",
@@ -346,3 +349,31 @@ def amin(x: Any, axis: int, keepdims: bool = False) -> Any:
     import torch
 
     return torch.amin(x, dim=axis, keepdim=keepdims)
+
+
+# Appended for the optimisers (policies/optimizers/): their loops work in preallocated buffers
+# (docs of that package: at the DMPC's sizes an iteration is per-call overhead).
+def copy_where(dst: Any, src: Any, mask: Any) -> None:
+    """``dst[mask] = src[mask]`` in place, ``mask`` broadcast to ``dst`` (``np.copyto(where=)``)."""
+    if isinstance(dst, np.ndarray):
+        np.copyto(dst, src, where=mask)
+        return
+    dst.copy_(dst.where(~mask, src))
+
+
+def concat_into(out: Any, arrays: tuple[Any, ...], axis: int) -> Any:
+    """``concat(arrays, axis)`` written into ``out`` (the standard's ``concat`` has no ``out``)."""
+    if isinstance(out, np.ndarray):
+        return np.concatenate(arrays, axis=axis, out=out)
+    import torch
+
+    return torch.cat(arrays, dim=axis, out=out)
+
+
+def nan_to_inf(x: Any) -> Any:
+    """A new array with NaN replaced by +inf (``np.fmin(x, inf)``: NaN can never be a minimum)."""
+    if isinstance(x, np.ndarray):
+        return np.fmin(x, np.inf)
+    import torch
+
+    return torch.where(torch.isnan(x), torch.inf, x)

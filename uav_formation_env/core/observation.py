@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.core.array_api import (
+    as_float,
     asarray_like,
     clip_in_place,
     constant_like,
@@ -263,11 +264,14 @@ def require_decodable(scenario, policy: str) -> None:
 def decode_observations(obs: np.ndarray, n_uav: int) -> DecodedObservation:
     """Undo the scaling of :func:`build_observations` (the unclipped slots exactly).
 
-    numpy only (the decoding policies are numpy policies): a torch ``obs`` must be moved to the
-    host first (``array_api.to_numpy``)."""
-    obs = np.asarray(obs, dtype=float)
+    numpy or torch: the decoded arrays are float64 in the library and on the device of ``obs``
+    (the observations themselves are float32)."""
+    obs = as_float(obs)
+    xp = namespace_of(obs)
+    if not is_numpy(xp):
+        obs = xp.astype(obs, xp.float64)
     other = obs[..., OWN_DIM:].reshape(*obs.shape[:-1], n_uav - 1, OTHER_DIM)
-    relative = np.concatenate(
+    relative = xp.concat(
         (other[..., 1:4] * FORMATION_SCALE, other[..., 4:7] * VELOCITY_SCALE), axis=-1
     )
     return DecodedObservation(

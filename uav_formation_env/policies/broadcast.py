@@ -13,7 +13,9 @@ non-neighbour's view is predicted with zero inputs and enters J_i only through t
 (every other UAV is sensed; docs/deviations.md §5). The relative position of j seen by i is the
 observed relative formation error plus the mission offsets, ``p^d_j - p^d_i``.
 
-Shapes: B copies, N UAVs (receivers i and senders j), H horizon steps.
+Shapes: B copies, N UAVs (receivers i and senders j), H horizon steps. Arrays are numpy or torch
+(the library and device of the decoded observations; the full layout on torch, the local layout
+on numpy).
 """
 
 from __future__ import annotations
@@ -24,6 +26,13 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core import topology
+from uav_formation_env.core.array_api import (
+    as_float,
+    asarray_like,
+    constant_like,
+    device,
+    namespace_of,
+)
 from uav_formation_env.core.cost import (
     HorizonCost,
     anchored,
@@ -56,8 +65,8 @@ def shift_warm_start(plans: np.ndarray) -> np.ndarray:
     Returns:
         (..., H, 3) ``[u(1|t-δ), ..., u(H-1|t-δ), u(H-1|t-δ)]`` (a new array).
     """
-    plans = np.asarray(plans, dtype=float)
-    return np.concatenate((plans[..., 1:, :], plans[..., -1:, :]), axis=-2)
+    plans = as_float(plans)
+    return namespace_of(plans).concat((plans[..., 1:, :], plans[..., -1:, :]), axis=-2)
 
 
 def observed_time(time_fraction: np.ndarray, duration: float, dt: float) -> np.ndarray:
@@ -71,7 +80,8 @@ def observed_time(time_fraction: np.ndarray, duration: float, dt: float) -> np.n
     Returns:
         (...) ``round(t / δ) δ``, the same float the simulator computes as ``steps * δ``.
     """
-    return np.round(np.asarray(time_fraction, dtype=float) * duration / dt) * dt
+    fraction = as_float(time_fraction)
+    return namespace_of(fraction).round(fraction * duration / dt) * dt
 
 
 # the switching times the local observation implies are snapped to this grid [s]: the float32
@@ -124,15 +134,19 @@ def own_frame_views(
         offsets: (N, 6) formation offsets z^d (mission data).
         mirrored: literal mirrored-offset reading (as the observation was built).
     """
-    batch, n = decoded.velocity.shape[:2]
-    rows, others = np.arange(n)[:, None], others_index(n)
-    z_own = np.concatenate((np.zeros((batch, n, 3)), decoded.velocity), axis=-1)
+    velocity = decoded.velocity
+    xp, where = namespace_of(velocity), {"dtype": velocity.dtype, "device": device(velocity)}
+    batch, n = velocity.shape[:2]
+    offsets = asarray_like(offsets, velocity)
+    rows = xp.arange(n, device=device(velocity))[:, None]
+    others = constant_like(others_index(n), velocity)
+    z_own = xp.concat((xp.zeros((batch, n, 3), **where), velocity), axis=-1)
     a_own = anchored(z_own, offsets, mirrored)  # (B, N, 6)
-    views = np.repeat(a_own[:, :, None], n, axis=2)  # anchored, (B, N_recv, N_send, 6)
+    views = xp.repeat(a_own[:, :, None], n, axis=2)  # anchored, (B, N_recv, N_send, 6)
     views[:, rows, others] += decoded.relative_formation_error
     views += relative_offset_sign(mirrored) * offsets  # states z_j = a_j ± z^d_j
-    adjacency = np.zeros((batch, n, n))
-    adjacency[:, rows, others] = decoded.neighbour
+    adjacency = xp.zeros((batch, n, n), **where)
+    adjacency[:, rows, others] = xp.astype(decoded.neighbour, velocity.dtype)
     return OwnFrameViews(z_own=z_own, views=views, adjacency=adjacency)
 
 
@@ -146,7 +160,7 @@ def received_plans(plans: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
     Returns:
         (B, N_recv, N_send, H, 3) [m/s^2].
     """
-    return np.where(adjacency[..., None, None] > 0, plans[:, None], 0.0)
+    return namespace_of(plans).where(adjacency[..., None, None] > 0, plans[:, None], 0.0)
 
 
 @dataclass(frozen=True)
@@ -243,7 +257,7 @@ def horizon_problems(
             dt,
         )
     else:
-        offsets = np.asarray(scenario.formation.offsets, dtype=float)
+        offsets = asarray_like(np.asarray(scenario.formation.offsets, dtype=float), plans)
         mirrored = scenario.formation.mirrored_offsets
         frame = own_frame_views(decoded, offsets, mirrored)
         trajectories = superposed_rollout(frame.views, received_plans(plans, frame.adjacency), dt)
@@ -257,5 +271,6 @@ def horizon_problems(
             dt,
             mirrored,
         )
-    half_width = np.maximum(scenario.dynamics.u_max - np.abs(decoded.estimate), 0.0)
+    xp = namespace_of(decoded.estimate)
+    half_width = xp.maximum(scenario.dynamics.u_max - xp.abs(decoded.estimate), 0.0)
     return HorizonProblems(cost=cost, half_width=half_width)

@@ -62,6 +62,14 @@ Steps 1-4 are a solver of :mod:`uav_formation_env.policies.dmpc_step`: ``Trigger
 ``MetaheuristicSolver`` or an ``ExactSolver`` per round, or ``NashIteration``; each step appends a
 ``StepRecord``, stacked by :meth:`NashDMPCPolicy.records`.
 
+Backends: ``act_batch`` takes numpy observations, or torch tensors on any device (the episode
+layer's ``backend="torch"``). With tensors the decoded observations, every UAV's horizon problem,
+the populations and the broadcast plans stay in torch on that device and the actions come back as
+a tensor there; the random numbers are still drawn from the copies' numpy generators on the host
+(the same numbers as on numpy, so a seed flies the same episode to rounding). On torch the
+metaheuristics (PIO, LFPIO, PSO) and the full observation layout run; ``"exact"``, ``"nash"`` and
+the local layout are numpy-only.
+
 Randomness: one ``numpy.random.Generator`` per scenario copy. ``reset(batch_size, seeds)`` seeds
 copy b's stream from its episode's seed (and the policy's ``seed``, if given), so an episode
 named by its seed flies the same, bit for bit, alone or inside any batch (the runner and
@@ -81,6 +89,7 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.core.array_api import as_float, namespace_of, to_numpy
 from uav_formation_env.core.local_observation import (
     DecodedLocalObservation,
     decode_local_observations,
@@ -92,7 +101,13 @@ from uav_formation_env.core.observation import (
     require_decodable,
 )
 from uav_formation_env.policies.broadcast import shift_warm_start
-from uav_formation_env.policies.dmpc_step import DMPCRecords, StepRecord, step_solver
+from uav_formation_env.policies.dmpc_step import (
+    DMPCRecords,
+    MetaheuristicSolver,
+    StepRecord,
+    TriggeredRounds,
+    step_solver,
+)
 from uav_formation_env.policies.registry import DMPC_OPTIMIZERS, SolverConfig, solver_config
 from uav_formation_env.seeding import check_seed, copy_streams
 
@@ -178,7 +193,7 @@ class NashDMPCPolicy:
         self.u_max = sc.dynamics.u_max
         self.obs_dim = observation_size(sc)
         self.agents = [f"uav_{i}" for i in range(self.n_uav)]
-        self._plans: np.ndarray | None = None  # (B, N, H, 3) last broadcast plans [m/s^2]
+        self._plans: Any = None  # (B, N, H, 3) last broadcast plans [m/s^2], numpy or torch
         self._records: list[StepRecord] = []
         self._wall: list[float] = []
 
@@ -224,10 +239,11 @@ class NashDMPCPolicy:
 
     @property
     def plans(self) -> np.ndarray:
-        """(B, N, H, 3) the sequences every UAV broadcast at the last step [m/s^2] (a copy)."""
+        """(B, N, H, 3) the sequences every UAV broadcast at the last step [m/s^2] (a numpy
+        copy, also when the policy acts on tensors)."""
         if self._plans is None:
             raise RuntimeError("no plans yet: call reset() or act first")
-        return self._plans.copy()
+        return np.array(to_numpy(self._plans))
 
     @plans.setter
     def plans(self, value: np.ndarray) -> None:
@@ -245,43 +261,58 @@ class NashDMPCPolicy:
         return shift_warm_start(self.plans)
 
     # ------------------------------------------------------------------ acting
-    def act_batch(self, obs: np.ndarray, neighbour_index: np.ndarray | None = None) -> np.ndarray:
+    def act_batch(self, obs: Any, neighbour_index: np.ndarray | None = None) -> Any:
         """One control step of every UAV of every copy.
 
         Args:
             obs: (B, N, dim) observations of :func:`~uav_formation_env.episode.observations_of`
-                (agent order uav_0..uav_{N-1}).
+                (agent order uav_0..uav_{N-1}); numpy, or a torch tensor (see "Backends" in
+                the module docstring).
             neighbour_index: (B, N, k) the UAV in each neighbour slot of the local layout
                 (:attr:`~uav_formation_env.episode.EpisodeStep.neighbour_index`): whose plans a
                 UAV receives. Required with ``observation.kind = "local"``, else unused.
 
         Returns:
-            (B, N, 3) normalised actions ``u_n(0|t) / u_max`` in [-1, 1].
+            (B, N, 3) normalised actions ``u_n(0|t) / u_max`` in [-1, 1], float64, in the library
+            and on the device of ``obs``.
         """
         start = time.perf_counter()
         decoded = self._decode(obs, neighbour_index)
         self._restart(decoded.time_fraction[:, 0] == 0.0, decoded.velocity.shape[1])
         assert self._plans is not None
+        self._plans = as_float(self._plans, decoded.velocity)  # onto the observations' device
         output, record = self._solver.step(decoded, self._plans, self.threshold, self._rngs)
         self._plans = output
         self._records.append(record)
         self._wall.append(time.perf_counter() - start)
-        return np.clip(output[..., 0, :] / self.u_max, -1.0, 1.0)
+        return namespace_of(output).clip(output[..., 0, :] / self.u_max, -1.0, 1.0)
 
     def _decode(
         self, obs: np.ndarray, neighbour_index: np.ndarray | None
     ) -> DecodedObservation | DecodedLocalObservation:
         """Check and decode (B, N, dim) observations; a ValueError names what is wrong."""
-        obs = np.asarray(obs, dtype=np.float64)
+        if isinstance(obs, np.ndarray) or not hasattr(obs, "device"):
+            obs = np.asarray(obs, dtype=np.float64)
+        elif self.local or not (
+            isinstance(self._solver, TriggeredRounds)
+            and isinstance(self._solver.solver, MetaheuristicSolver)
+        ):
+            raise ValueError(
+                "obs is a tensor, but this policy runs on numpy only (the local observation "
+                "layout, 'exact' and 'nash' are numpy-only; PIO, LFPIO and PSO on the full "
+                "layout run on torch); pass numpy observations"
+            )
+        xp = namespace_of(obs)
         n_text = "N" if self.local else str(self.n_uav)
         if (
             obs.ndim != 3
             or obs.shape[2] != self.obs_dim
             or (not self.local and obs.shape[1] != self.n_uav)
         ):
-            raise ValueError(f"obs must have shape (B, {n_text}, {self.obs_dim}), got {obs.shape}")
-        if not np.isfinite(obs).all():
-            copy, agent = np.argwhere(~np.isfinite(obs))[0, :2]
+            shape = tuple(obs.shape)
+            raise ValueError(f"obs must have shape (B, {n_text}, {self.obs_dim}), got {shape}")
+        if not bool(xp.all(xp.isfinite(obs))):
+            copy, agent = np.argwhere(~np.isfinite(to_numpy(obs)))[0, :2]
             raise ValueError(
                 f"obs contains NaN or infinite values (first: copy {copy}, uav_{agent}); a "
                 "policy cannot act on them"
@@ -379,17 +410,18 @@ class NashDMPCPolicy:
             self.reset(batch)
         assert self._plans is not None
         if self._plans.shape[1] != n_uav:  # the local layout: a new episode of another N
-            if not restart.all():
+            if not bool(restart.all()):
                 raise ValueError(
                     f"obs holds {n_uav} UAVs, but the episodes under way have "
                     f"{self._plans.shape[1]}; N may change only when every copy starts anew"
                 )
             self._plans = np.zeros((batch, n_uav, self.horizon, 3))
-        elif restart.all() and not self._fresh:
+        elif bool(restart.all()) and not self._fresh:
             # a new episode in every copy: the copies' streams go on
             self._plans[:] = 0.0
             self._records = []
             self._wall = []
-        elif restart.any():
+        elif bool(restart.any()):
+            self._plans = as_float(self._plans, restart)
             self._plans[restart] = 0.0
         self._fresh = False

@@ -16,6 +16,10 @@ Solvers work at two levels (docs/model.md §5, §6):
 a :class:`StepRecord`; :meth:`DMPCRecords.from_steps` stacks the records of an episode.
 
 Shapes: B copies, N UAVs, H horizon steps, M flattened (triggered) problems.
+
+:class:`TriggeredRounds` with a :class:`MetaheuristicSolver` runs on numpy or torch (the library
+and device of the decoded observations and plans); the exact solvers and :class:`NashIteration`
+run on numpy. Records are numpy arrays.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from typing import Protocol
 import numpy as np
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.array_api import copy, device, namespace_of, to_numpy
 from uav_formation_env.core.observation import DecodedObservation
 from uav_formation_env.policies.best_response import ExactConfig, best_response
 from uav_formation_env.policies.broadcast import (
@@ -76,16 +81,17 @@ class StepRecord:
         nash_iterations: np.ndarray | None = None,
         nash_converged: np.ndarray | None = None,
     ) -> StepRecord:
-        """The record of the step at the observed time (no Nash sweeps: 0 and converged)."""
+        """The record of the step at the observed time (no Nash sweeps: 0 and converged), as
+        numpy arrays whatever the backend of its inputs."""
         batch = triggered.shape[0]
         return cls(
-            time=observed_time(
-                decoded.time_fraction[:, 0], scenario.duration, scenario.dynamics.dt
+            time=to_numpy(
+                observed_time(decoded.time_fraction[:, 0], scenario.duration, scenario.dynamics.dt)
             ),
-            triggered=triggered,
-            j_pre=j_pre,
-            j_exec=j_exec,
-            evaluations=evaluations,
+            triggered=to_numpy(triggered),
+            j_pre=to_numpy(j_pre),
+            j_exec=to_numpy(j_exec),
+            evaluations=to_numpy(evaluations),
             nash_iterations=(
                 np.zeros(batch, dtype=np.int64) if nash_iterations is None else nash_iterations
             ),
@@ -243,10 +249,11 @@ class TriggeredRounds:
     ) -> tuple[np.ndarray, StepRecord]:
         h = self.scenario.cost.horizon
         current = shift_warm_start(plans)  # W_i, and W_j as the receivers compute it
-        shape = current.shape[:2]
-        triggered = np.zeros(shape, dtype=bool)
-        evals = np.zeros(shape, dtype=np.int64)
-        j_pre = j_cur = np.zeros(shape)
+        xp, on = namespace_of(current), device(current)
+        shape = tuple(current.shape[:2])
+        triggered = xp.zeros(shape, dtype=xp.bool, device=on)
+        evals = xp.zeros(shape, dtype=xp.int64, device=on)
+        j_pre = j_cur = xp.zeros(shape, dtype=current.dtype, device=on)
         for round_ in range(self.inner_rounds):
             problems = horizon_problems(decoded, current, self.scenario)
             j_cur = problems.cost.terms(current[:, :, None]).total[..., 0]
@@ -254,23 +261,24 @@ class TriggeredRounds:
                 j_pre = j_cur
             trig = j_cur > threshold
             triggered |= trig
-            index = np.flatnonzero(trig)
-            if index.size == 0:
+            index = xp.nonzero(xp.reshape(trig, (-1,)))[0]
+            if index.shape[0] == 0:
                 continue
             sub = problems.cost.take(index)  # the M triggered problems as one copy
             half = problems.half_width.reshape(-1, 3)[index][None]  # (1, M, 3)
             x0 = current.reshape(-1, h, 3)[index]
-            streams = RowStreams(rngs, trig.sum(axis=1))  # index is ordered by copy
+            # index is ordered by copy; the row counts go to the host generators
+            streams = RowStreams(rngs, to_numpy(xp.sum(trig, axis=1)))
             result_x, n_evals = self.solver.solve(HorizonProblems(sub, half), x0, streams)
             # Exact J_i of the solver's answer; keep W where it is not strictly better.
             found = sub.terms(result_x[None, :, None]).total[0, :, 0]
-            better = found < j_cur.reshape(-1)[index]
-            flat = current.reshape(-1, h, 3).copy()
+            better = found < xp.reshape(j_cur, (-1,))[index]
+            flat = copy(xp.reshape(current, (-1, h, 3)))
             flat[index[better]] = result_x[better]
-            current = flat.reshape(current.shape)
-            j_cur = j_cur.copy()
-            j_cur.reshape(-1)[index[better]] = found[better]
-            evals.reshape(-1)[index] += n_evals
+            current = xp.reshape(flat, current.shape)
+            j_cur = copy(j_cur)
+            xp.reshape(j_cur, (-1,))[index[better]] = found[better]
+            xp.reshape(evals, (-1,))[index] += n_evals
         return current, StepRecord.of(decoded, self.scenario, triggered, j_pre, j_cur, evals)
 
 

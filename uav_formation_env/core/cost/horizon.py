@@ -1,4 +1,8 @@
-"""J_i over a horizon of candidate input sequences: the MPC objective, prepared once per step."""
+"""J_i over a horizon of candidate input sequences: the MPC objective, prepared once per step.
+
+Backend-neutral: the arrays of a :class:`HorizonCost` live in the library and on the device of
+the measured states it was prepared from (numpy, or torch; :mod:`uav_formation_env.core.array_api`).
+"""
 
 from __future__ import annotations
 
@@ -7,6 +11,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from uav_formation_env.config import CostConfig
+from uav_formation_env.core.array_api import (
+    as_float,
+    asarray_like,
+    constant_like,
+    device,
+    einsum_in,
+    namespace_of,
+)
 from uav_formation_env.core.cost.quadratic import (
     QuadraticCost,
     SeparationCost,
@@ -78,7 +90,7 @@ class HorizonCost:
         own = predicted - self.own_offset[:, :, None, None, :]  # anchored, as anchored()
         pair_sq = self.moments.error_sq(own)  # (B, R, P, H+1)
         velocity_sq = velocity_error_sq(predicted[..., 3:], self.reference_preview[:, :, None])
-        w = self.weights
+        xp, w = namespace_of(predicted), self.weights
         formation = w.q * pair_sq[..., :-1].sum(axis=-1)
         if with_separation and separation_active(w):
             gap_sq = separation_sq(
@@ -86,10 +98,10 @@ class HorizonCost:
             )  # (B, R, P, H+1)
             separation = w.separation * gap_sq.sum(axis=-1)
         else:
-            separation = np.zeros_like(formation)
+            separation = xp.zeros_like(formation)
         return CostTerms(
             formation=formation,
-            energy=w.r * np.einsum("...hk,...hk->...", candidates, candidates),
+            energy=w.r * einsum_in(xp, "...hk,...hk->...", candidates, candidates),
             terminal=w.m * pair_sq[..., -1],
             velocity=w.n * velocity_sq.sum(axis=-1),
             separation=separation,
@@ -126,19 +138,22 @@ class HorizonCost:
         w = self.weights
         if not separation_active(w):
             return None
+        xp = namespace_of(self.free)
         batch, n_recv, h1 = self.free.shape[:3]
         horizon = h1 - 1
         response = self.response.reshape(3 * horizon, h1, 6)[:, :, :3].reshape(3 * horizon, -1)
         free = self.free[..., :3]  # (B, R, H+1, 3)
-        keep = np.broadcast_to(self.others_mask > 0, self.others_mask.shape)
+        keep = self.others_mask > 0
         if half_width is not None:
-            reach = np.tile(np.asarray(half_width, dtype=float), horizon) @ np.abs(response)
-            reach = np.sqrt((reach.reshape(batch, n_recv, h1, 3) ** 2).sum(axis=-1))
+            reach = xp.tile(as_float(half_width, self.free), (horizon,)) @ xp.abs(response)
+            reach = xp.sqrt(xp.sum(reach.reshape(batch, n_recv, h1, 3) ** 2, axis=-1))
             diff = free[:, :, None] - self.others_position  # (B, R, S, H+1, 3)
-            closest = np.sqrt(np.einsum("...k,...k->...", diff, diff)) - reach[:, :, None]
-            keep = keep & (closest.min(axis=-1) < w.separation_distance + 1e-6)
-        problem, sender = np.nonzero(keep.reshape(batch * n_recv, -1))
-        rows, pair_row = np.unique(problem, return_inverse=True)
+            pair = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
+            closest = pair - reach[:, :, None]
+            keep = keep & (xp.min(closest, axis=-1) < w.separation_distance + 1e-6)
+        keep = xp.broadcast_to(keep, self.others_mask.shape)
+        problem, sender = xp.nonzero(keep.reshape(batch * n_recv, -1))
+        rows, pair_row = xp.unique_inverse(problem)
         return SeparationCost(
             shape=(batch, n_recv),
             rows=rows,
@@ -165,13 +180,15 @@ class HorizonCost:
         directly, for the pairs :meth:`separation_part` keeps with ``half_width`` (exact for
         candidates in that box; every pair without it).
         """
+        xp = namespace_of(self.free)
         batch, n_recv = self.free.shape[:2]
         horizon = self.free.shape[2] - 1
         n = 3 * horizon
         points, upper = polarisation_points(n)
+        points = constant_like(points, self.free)
         values = self._terms(
-            np.broadcast_to(
-                points.reshape(-1, horizon, 3), (batch, n_recv) + (len(points), horizon, 3)
+            xp.broadcast_to(
+                points.reshape(-1, horizon, 3), (batch, n_recv) + (points.shape[0], horizon, 3)
             ),
             with_separation=False,
         ).total
@@ -181,10 +198,10 @@ class HorizonCost:
             values[..., n + 1 : 2 * n + 1],
             values[..., 2 * n + 1 :],
         )
-        hessian = np.empty((batch, n_recv, n, n))
-        diag = np.arange(n)
+        hessian = xp.empty((batch, n_recv, n, n), dtype=values.dtype, device=device(values))
+        diag = xp.arange(n, device=device(values))
         hessian[..., diag, diag] = 0.5 * (plus + minus) - c[..., None]
-        i, j = upper
+        i, j = (constant_like(k, values) for k in upper)
         off = 0.5 * (pairs - plus[..., i] - plus[..., j] + c[..., None])
         hessian[..., i, j] = off
         hessian[..., j, i] = off
@@ -221,6 +238,10 @@ def prepare_horizon_cost(
         dt: control step δ [s].
         mirrored: literal mirrored-offset reading.
     """
+    xp = namespace_of(z0)
+    offsets = asarray_like(offsets, z0)  # e.g. the config's, as numpy
+    if not isinstance(z0, np.ndarray):
+        adjacency = asarray_like(adjacency, z0)
     per_receiver = neighbour_trajectories.ndim == 5
     n_uav = offsets.shape[0]
     send_offsets = (
@@ -230,13 +251,13 @@ def prepare_horizon_cost(
     batch, n_recv = z0.shape[:2]
     positions = neighbour_trajectories[..., :3]
     if not per_receiver:
-        positions = np.broadcast_to(positions[:, None], (batch, n_recv, *positions.shape[1:]))
+        positions = xp.broadcast_to(positions[:, None], (batch, n_recv, *positions.shape[1:]))
     return _prepared(
         z0,
         z0 - anchored(z0, offsets, mirrored),
         neighbour_moments(others, adjacency, per_receiver),
         positions,
-        others_mask(batch, n_recv),
+        others_mask(batch, n_recv, like=z0),
         reference_preview,
         weights,
         dt,
@@ -274,10 +295,10 @@ def prepare_slot_horizon_cost(
     """
     return _prepared(
         z0,
-        np.zeros_like(z0),
+        namespace_of(z0).zeros_like(z0),
         neighbour_moments(slot_trajectories - slot_offsets[..., None, :], adjacency, True),
         slot_trajectories[..., :3],
-        np.asarray(present, dtype=float),
+        as_float(present, z0),
         reference_preview,
         weights,
         dt,
@@ -297,10 +318,12 @@ def _prepared(
     """The :class:`HorizonCost` of prepared senders' terms: the receivers' free response and the
     unit input responses are computed here, once for both frames."""
     horizon = reference_preview.shape[-2] - 1
-    free = (z0 @ state_response(horizon, dt)).reshape(*z0.shape[:-1], horizon + 1, 6)
+    free = (z0 @ constant_like(state_response(horizon, dt), z0)).reshape(
+        *z0.shape[:-1], horizon + 1, 6
+    )
     return HorizonCost(
         free=free,
-        response=input_response(horizon, dt),
+        response=constant_like(input_response(horizon, dt), z0),
         own_offset=own_offset,
         moments=moments,
         reference_preview=reference_preview,

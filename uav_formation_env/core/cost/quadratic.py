@@ -1,5 +1,7 @@
 """Exact quadratic form of J_i in the own inputs, the separation remainder, and the linear
-prediction model they are identified with."""
+prediction model they are identified with (numpy or torch arrays; the cached unit responses are
+numpy constants, moved to a tensor's device by
+:func:`~uav_formation_env.core.array_api.constant_like`)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,13 @@ from functools import lru_cache
 
 import numpy as np
 
+from uav_formation_env.core.array_api import (
+    add_at,
+    constant_like,
+    device,
+    einsum_in,
+    namespace_of,
+)
 from uav_formation_env.core.cost.stage import take_flat
 from uav_formation_env.core.dynamics import rollout
 
@@ -41,42 +50,51 @@ class SeparationCost:
 
     def total(self, candidates: np.ndarray) -> np.ndarray:
         """``s Σ_pairs Σ_k max(0, d_s - ||p_i(k) - p̂_j(k)||)²`` of candidates (B, R, P, H, 3)."""
+        xp = namespace_of(candidates)
         batch, n_recv, size = candidates.shape[:3]
-        out = np.zeros((batch * n_recv, size))
-        if self.rows.size:
+        where = {"dtype": candidates.dtype, "device": device(candidates)}
+        out = xp.zeros((batch * n_recv, size), **where)
+        n_rows = self.rows.shape[0]
+        if n_rows:
             h1 = self.others.shape[1]
             x = candidates.reshape(batch * n_recv, size, -1)[self.rows]  # (K, P, 3H)
             position = (x @ self.response + self.free[:, None]).reshape(-1, size, h1, 3)
             diff = position[self.pair_row] - self.others[:, None]  # (A, P, H+1, 3)
-            gap = np.maximum(self.distance - np.sqrt(np.einsum("...k,...k->...", diff, diff)), 0)
-            per_pair = np.einsum("aph,aph->ap", gap, gap)
-            summed = np.zeros((self.rows.size, size))
-            np.add.at(summed, self.pair_row, per_pair)
+            distance = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
+            gap = xp.maximum(self.distance - distance, 0.0)
+            per_pair = einsum_in(xp, "aph,aph->ap", gap, gap)
+            summed = xp.zeros((n_rows, size), **where)
+            add_at(summed, self.pair_row, per_pair)
             out[self.rows] = self.weight * summed
         return out.reshape(batch, n_recv, size)
 
     def take(self, index: np.ndarray) -> SeparationCost:
-        """Problems ``index`` (M,) of the flattened (B·R) axis as one copy (grid (1, M))."""
-        index = np.asarray(index)
-        position = {int(row): k for k, row in enumerate(self.rows)}
-        new_rows, free, pair_row, others = [], [], [], []
-        for t, flat in enumerate(index.tolist()):
-            k = position.get(int(flat))
-            if k is None:
-                continue
-            pairs = np.flatnonzero(self.pair_row == k)
-            pair_row.extend([len(new_rows)] * pairs.size)
-            new_rows.append(t)
-            free.append(self.free[k])
-            others.append(self.others[pairs])
-        h1 = self.others.shape[1]
+        """Problems ``index`` (M,) of the flattened (B·R) axis as one copy (grid (1, M)).
+
+        ``index`` holds distinct problems (in any order; an integer array of the library of the
+        cost). The kept problems are ordered as in ``index``, each with its pairs in their order.
+        """
+        xp = namespace_of(self.free)
+        index = xp.asarray(index, device=device(self.free))
+        n_flat = self.shape[0] * self.shape[1]
+        # k of each problem in `rows` (-1: no kept pair), and the position t in `index` of each k
+        k_of_flat = xp.full(n_flat, -1, dtype=index.dtype, device=device(index))
+        k_of_flat[self.rows] = xp.arange(self.rows.shape[0], device=device(index))
+        k_of_t = k_of_flat[index]
+        kept_t = xp.nonzero(k_of_t >= 0)[0]  # positions in `index`, in order
+        kept_k = k_of_t[kept_t]
+        new_of_k = xp.full(self.rows.shape[0], -1, dtype=index.dtype, device=device(index))
+        new_of_k[kept_k] = xp.arange(kept_t.shape[0], device=device(index))
+        new_row = new_of_k[self.pair_row]  # the new problem of every pair, -1: dropped
+        pairs = xp.nonzero(new_row >= 0)[0]
+        pairs = pairs[xp.argsort(new_row[pairs], stable=True)]  # grouped by new problem
         return SeparationCost(
-            shape=(1, index.size),
-            rows=np.asarray(new_rows, dtype=np.int64),
-            pair_row=np.asarray(pair_row, dtype=np.int64),
-            free=np.asarray(free).reshape(len(new_rows), self.free.shape[1]),
+            shape=(1, index.shape[0]),
+            rows=kept_t,
+            pair_row=new_row[pairs],
+            free=self.free[kept_k],
             response=self.response,
-            others=np.concatenate(others) if others else np.zeros((0, h1, 3)),
+            others=self.others[pairs],
             weight=self.weight,
             distance=self.distance,
         )
@@ -108,10 +126,10 @@ class QuadraticCost:
         x = candidates.reshape(batch * n_recv, size, n)
         y = x @ self.hessian.reshape(batch * n_recv, n, n)
         y += self.linear.reshape(batch * n_recv, 1, n)
-        total = np.einsum("rpk,rpk->rp", y, x)
+        total = einsum_in(namespace_of(x), "rpk,rpk->rp", y, x)
         total += self.constant.reshape(batch * n_recv, 1)
         total = total.reshape(batch, n_recv, size)
-        if self.separation is not None and self.separation.rows.size:
+        if self.separation is not None and self.separation.rows.shape[0]:
             total += self.separation.total(candidates)
         return total
 
@@ -175,6 +193,6 @@ def superposed_rollout(z0: np.ndarray, inputs: np.ndarray, dt: float) -> np.ndar
         (..., H + 1, 6).
     """
     *lead, horizon, _ = inputs.shape
-    forced = inputs.reshape(*lead, 3 * horizon) @ input_response(horizon, dt)
-    forced += z0 @ state_response(horizon, dt)
+    forced = inputs.reshape(*lead, 3 * horizon) @ constant_like(input_response(horizon, dt), z0)
+    forced += z0 @ constant_like(state_response(horizon, dt), z0)
     return forced.reshape(*lead, horizon + 1, 6)

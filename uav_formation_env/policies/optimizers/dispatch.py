@@ -50,8 +50,10 @@ def minimise(
         batch_ndim: How many leading axes of ``x0`` are batch axes (1 for ``(M, H, 3)``).
         compiled: Run LFPIO's per-iteration bookkeeping as compiled numba kernels (the same
             numbers as the numpy code, ~2x faster at small batches). None: whenever numba is
-            installed (the ``[fast]`` extra) and ``UAV_FORMATION_NO_NUMBA`` is unset. Only LFPIO
-            with ``prod(dims) >= 2`` has kernels; other cases always use numpy.
+            installed (the ``[fast]`` extra), ``UAV_FORMATION_NO_NUMBA`` is unset and ``x0`` is
+            a numpy array. Only LFPIO with ``prod(dims) >= 2`` on numpy has kernels; other
+            cases run the array code (numpy, or torch for a tensor ``x0``: the populations stay
+            on its device, the random draws come from ``rng`` on the host).
 
     Returns:
         The best position evaluated per problem, never worse than ``x0``; see :class:`OptimResult`.
@@ -68,10 +70,13 @@ def minimise(
     if isinstance(config, PIOConfig):
         pio_search(run, rng, config)
     elif isinstance(config, LFPIOConfig):
+        on_numpy = isinstance(run.x0, np.ndarray)
         if compiled is None:
-            compiled = COMPILED_AVAILABLE
+            compiled = COMPILED_AVAILABLE and on_numpy
         if compiled and not COMPILED_AVAILABLE:
             raise RuntimeError("compiled=True needs numba (the [fast] extra)")
+        if compiled and not on_numpy:
+            raise ValueError("compiled=True runs on numpy arrays only; x0 is a tensor")
         if compiled and run.n >= 2:
             lfpio_search_compiled(run, rng, config)
         else:
