@@ -155,3 +155,25 @@ def test_numpy_only_solvers_refuse_tensor_observations() -> None:
         policy.act_batch(obs)
     action = policy.act_batch(to_numpy(obs))
     assert action.shape == (1, 5, 3) and np.isfinite(action).all()
+
+
+def test_runner_on_torch_records_the_numpy_episode() -> None:
+    """run_episodes(backend="torch"): the DMPC acts on tensors, the heuristic (numpy-only) gets
+    numpy observations, and both record the numpy run's episode as numpy arrays."""
+    from uav_formation_env.config_io import with_overrides
+    from uav_formation_env.evaluation import make_policy, run_episodes
+
+    scenario = with_overrides(paper_scenario(), {"duration": 3.0})
+    for name in ("pio", "heuristic"):
+        policy = make_policy(name, scenario)
+        numpy_run = run_episodes(scenario, make_policy(name, scenario), [4, 9])
+        torch_run = run_episodes(scenario, policy, [4, 9], backend="torch", device="cpu")
+        # the DMPC acted on the device (its plans are tensors); the heuristic has no plans
+        assert isinstance(getattr(policy, "_plans", None), torch.Tensor) == (name == "pio")
+        for field in ("z", "stage_cost", "u_n", "estimate", "obstacle_center"):
+            got = getattr(torch_run, field)
+            assert isinstance(got, np.ndarray), field
+            np.testing.assert_allclose(got, getattr(numpy_run, field), rtol=1e-9, atol=1e-9)
+        if name == "pio":
+            np.testing.assert_array_equal(torch_run.triggered, numpy_run.triggered)
+            assert torch_run.triggered.any()

@@ -264,6 +264,9 @@ CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("render: bad suffix", lambda t: ["render", "--out", str(t / "movie.txt"), "--duration", "1"], r"\.gif or \.mp4"),
     ("render: zero fps", lambda t: ["render", "--fps", "0"], r"--fps: expected an integer >= 1"),
     ("model of another size", lambda t: ["evaluate", "--policy", str(PPO), "--scenario", "n3"], r"47 values.*gives 33"),
+    ("device without torch", lambda t: ["evaluate", "--device", "cuda", "--duration", "1"], r"--device cuda needs --backend torch"),
+    ("unknown device", lambda t: ["evaluate", "--backend", "torch", "--device", "gpu7", "--duration", "1"], r"device must name a torch device"),
+    ("reproduce: device without torch", lambda t: ["reproduce", "--device", "cpu", "--quick", "--out", str(t)], r"needs backend='torch'"),
 ]  # fmt: skip
 
 

@@ -152,6 +152,7 @@ def _mission_lines(summary: dict) -> list[str]:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    from uav_formation_env.core.array_api import torch_device
     from uav_formation_env.evaluation import (
         json_ready,
         make_policy,
@@ -163,6 +164,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     from uav_formation_env.plotting import plot_trajectories
     from uav_formation_env.scenes import n_uav_range
 
+    if args.device is not None and args.backend != "torch":
+        raise ValueError(f"--device {args.device} needs --backend torch")
     scenario = _scenario_for(args)
     seeds = _seeds(args)
     out = _out_dir(args.out)
@@ -190,9 +193,18 @@ def _evaluate(args: argparse.Namespace) -> int:
                 )
             ]
     else:
+        options = {}
+        if args.backend == "torch":
+            options = {"backend": "torch", "device": torch_device(args.device)}
         policy = make_policy(args.policy, scenario, algo=args.algo)
         batches = run_episode_groups(
-            scenario, policy, seeds, policy_name=args.policy, progress=not args.quiet, desc=desc
+            scenario,
+            policy,
+            seeds,
+            policy_name=args.policy,
+            progress=not args.quiet,
+            desc=desc,
+            **options,
         )
     summary = json_ready(summarise_groups(batches))
     records = []
@@ -262,6 +274,7 @@ def _reproduce(args: argparse.Namespace) -> int:
         backend=args.backend,
         address=args.address,
         chunk_size=args.chunk_size,
+        device=args.device,
     )
     summary = result.summary
     print(f"wall time {summary['wall_time_s']:.1f} s ({len(summary['seeds'])} seeds)")
@@ -359,9 +372,16 @@ def _add_common(parser: argparse.ArgumentParser, model_scenario: bool = False) -
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument(
         "--backend",
-        choices=["local", "ray"],
+        choices=["local", "ray", "torch"],
         default="local",
-        help="'ray': seeds (and variants) as Ray tasks, the same numbers ([ray] extra)",
+        help="'ray': seeds (and variants) as Ray tasks, the same numbers ([ray] extra); "
+        "'torch': all seeds as one batch of the torch episode layer on --device, the DMPC "
+        "metaheuristics acting on it ([rl] extra)",
+    )
+    parser.add_argument(
+        "--device",
+        default=None,
+        help="torch device with --backend torch, e.g. cuda or cpu (None: cuda if available)",
     )
     parser.add_argument(
         "--address",

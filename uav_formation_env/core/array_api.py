@@ -63,6 +63,7 @@ __all__ = [
     "subtract_into",
     "take",
     "to_numpy",
+    "torch_device",
 ]
 
 BACKENDS = ("numpy", "torch")  # the array libraries the core runs on
@@ -295,6 +296,17 @@ def backend_device(backend: str, device: Any = None) -> Any:
     except (RuntimeError, TypeError) as error:
         message = f"device must name a torch device such as 'cuda', got {device!r}"
         raise ValueError(message) from error
+
+
+def torch_device(device: Any = None) -> Any:
+    """The torch device a run asks for: ``device`` (checked as :func:`backend_device` does), or
+    for None CUDA when torch sees a GPU, else the CPU."""
+    if device is None:
+        namespace_of_backend("torch")  # a clear error if torch is missing
+        import torch
+
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    return backend_device("torch", device)
 
 
 def namespace_of(x: Any) -> ModuleType:

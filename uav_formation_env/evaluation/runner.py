@@ -13,6 +13,7 @@ from tqdm import tqdm
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import with_overrides
+from uav_formation_env.core.array_api import to_numpy
 from uav_formation_env.core.observation import decode_observations
 from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.episode import FormationEpisodes
@@ -126,6 +127,8 @@ def run_episodes(
     desc: str | None = None,
     nash_gap: bool = False,
     n_uav: int | None = None,
+    backend: str = "numpy",
+    device: Any = None,
 ) -> EpisodeBatch:
     """Run one episode per seed, all seeds as one batch, with one ``act_batch`` call per step.
 
@@ -148,6 +151,12 @@ def run_episodes(
             :func:`~uav_formation_env.policies.nash.nash_gap`); not counted in the policy's
             wall time.
         n_uav: N of a scenario that draws N per reset (None: the scenario's one N).
+        backend: the array library of the episode layer, ``"numpy"`` or ``"torch"``
+            (:mod:`uav_formation_env.core.array_api`); with torch, a policy whose
+            ``accepts_tensors`` is true (the DMPC metaheuristics on the full layout) gets the
+            observations as tensors and acts on the device; any other gets them as numpy
+            arrays. The records are numpy arrays either way.
+        device: the torch device (None: the CPU); numpy runs on the CPU only.
     """
     if duration is not None:
         scenario = with_overrides(scenario, {"duration": float(duration)})
@@ -156,7 +165,15 @@ def run_episodes(
         raise ValueError("seeds must be a non-empty list of non-negative ints")
     batch, n_steps = len(seeds), scenario.n_steps
     # evaluation's rule: every seed is flown to its end, collisions are counted, not ended on
-    episodes = FormationEpisodes(scenario, batch, fly_on_after_collision=True, n_uav=n_uav)
+    episodes = FormationEpisodes(
+        scenario,
+        batch,
+        fly_on_after_collision=True,
+        n_uav=n_uav,
+        backend=backend,
+        device=device,
+    )
+    tensors = backend != "numpy" and getattr(policy, "accepts_tensors", False)
     sim, n_uav = episodes.sim, episodes.n_uav
     if hasattr(policy, "reset"):
         policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
@@ -164,8 +181,9 @@ def run_episodes(
     step = episodes.reset(seed=seeds)
     result, obs = step.result, step.observation
 
-    def centre_min(z: np.ndarray) -> np.ndarray:
-        return obstacle_distances(z[..., :3], sim.field).min(axis=1, initial=np.inf)
+    def centre_min(z: Any) -> np.ndarray:
+        distance = to_numpy(obstacle_distances(z[..., :3], sim.field))
+        return distance.min(axis=1, initial=np.inf)
 
     states = [_state_record(result, centre_min)]
     steps: list[tuple] = []
@@ -180,17 +198,22 @@ def run_episodes(
     links = getattr(policy, "needs_neighbour_index", False)
     for k in range(n_steps):
         t0 = time.perf_counter()
-        if links:  # whose plans each UAV receives: communication metadata, not the observation
-            actions = np.asarray(policy.act_batch(obs, step.neighbour_index), dtype=float)
-        else:
-            actions = np.asarray(policy.act_batch(obs), dtype=float)
+        seen = obs if tensors else to_numpy(obs)
+        # whose plans each UAV receives: communication metadata, not the observation
+        extra = (step.neighbour_index,) if links else ()
+        actions = policy.act_batch(seen, *extra)
+        if not tensors:
+            actions = np.asarray(actions, dtype=float)
         t1 = time.perf_counter()
-        if actions.shape != (batch, n_uav, 3):
+        if tuple(actions.shape) != (batch, n_uav, 3):
             raise ValueError(
-                f"policy returned actions of shape {actions.shape}, expected {(batch, n_uav, 3)}"
+                f"policy returned actions of shape {tuple(actions.shape)}, expected "
+                f"{(batch, n_uav, 3)}"
             )
         if nash_gap:
-            gap = measure_nash_gap(obs, scenario, policy_plans(policy, obs, actions, scenario))
+            host_obs, host_actions = to_numpy(obs), to_numpy(actions)
+            plans = policy_plans(policy, host_obs, host_actions, scenario)
+            gap = measure_nash_gap(host_obs, scenario, plans)
             gaps.append((gap.gap, gap.cost, gap.in_box))
         t_sim = time.perf_counter()
         step = episodes.step(actions)
@@ -200,12 +223,12 @@ def run_episodes(
         states.append(_state_record(result, centre_min))
         steps.append(
             (
-                result.u_n,
-                result.u_applied,
-                result.disturbance,
-                result.cost.total,
-                result.cost.as_dict(),
-                result.collision,
+                to_numpy(result.u_n),
+                to_numpy(result.u_applied),
+                to_numpy(result.disturbance),
+                to_numpy(result.cost.total),
+                {name: to_numpy(v) for name, v in result.cost.as_dict().items()},
+                to_numpy(result.collision),
             )
         )
         if bar is not None:
@@ -243,9 +266,9 @@ def run_episodes(
         stage_cost=np.stack(stage),
         cost_terms={name: np.stack([t[name] for t in terms]) for name in terms[0]},
         collision=np.stack(collision),
-        activation_time=np.asarray(topo.activation_time, dtype=float).copy(),
-        restore_time=np.asarray(topo.restore_time, dtype=float).copy(),
-        case=np.asarray(topo.case, dtype=int).copy(),
+        activation_time=np.array(to_numpy(topo.activation_time), dtype=float),
+        restore_time=np.array(to_numpy(topo.restore_time), dtype=float),
+        case=np.array(to_numpy(topo.case), dtype=int),
         triggered=triggered,
         j_pre=j_pre,
         j_exec=j_exec,
@@ -305,12 +328,13 @@ def policy_plans(
 
 
 def _state_record(result, centre_min) -> tuple[np.ndarray, ...]:
+    """The recorded state fields of a step, as numpy arrays (copies off a device)."""
     return (
-        result.z,
-        result.reference_velocity,
-        result.estimate,
-        result.groups,
-        result.min_separation,
-        result.obstacle_distance,
+        to_numpy(result.z),
+        to_numpy(result.reference_velocity),
+        to_numpy(result.estimate),
+        to_numpy(result.groups),
+        to_numpy(result.min_separation),
+        to_numpy(result.obstacle_distance),
         centre_min(result.z),
     )

@@ -233,6 +233,17 @@ class NashDMPCPolicy:
         self._wall = []
 
     @property
+    def accepts_tensors(self) -> bool:
+        """Whether :meth:`act_batch` takes torch observations and acts on their device (the
+        metaheuristics on the full layout; see "Backends" in the module docstring)."""
+        solver = self._solver
+        return (
+            not self.local
+            and isinstance(solver, TriggeredRounds)
+            and isinstance(solver.solver, MetaheuristicSolver)
+        )
+
+    @property
     def streams(self) -> tuple[np.random.Generator, ...]:
         """The random generator of each copy (set by :meth:`reset`)."""
         return tuple(self._rngs)
@@ -293,10 +304,7 @@ class NashDMPCPolicy:
         """Check and decode (B, N, dim) observations; a ValueError names what is wrong."""
         if isinstance(obs, np.ndarray) or not hasattr(obs, "device"):
             obs = np.asarray(obs, dtype=np.float64)
-        elif self.local or not (
-            isinstance(self._solver, TriggeredRounds)
-            and isinstance(self._solver.solver, MetaheuristicSolver)
-        ):
+        elif not self.accepts_tensors:
             raise ValueError(
                 "obs is a tensor, but this policy runs on numpy only (the local observation "
                 "layout, 'exact' and 'nash' are numpy-only; PIO, LFPIO and PSO on the full "

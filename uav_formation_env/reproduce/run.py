@@ -17,6 +17,7 @@ from tqdm import tqdm
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.core.array_api import torch_device
 from uav_formation_env.evaluation import (
     EpisodeBatch,
     json_ready,
@@ -76,6 +77,7 @@ def reproduce(
     backend: str = "local",
     address: str | None = None,
     chunk_size: int = 1,
+    device: Any = None,
 ) -> Reproduction:
     """Fly the four variants on the same seeds and write the tables, figures and report.
 
@@ -99,11 +101,22 @@ def reproduce(
         backend: ``"local"`` (processes on this machine, ``jobs``) or ``"ray"`` (every
             (variant, ``chunk_size`` seeds) a Ray task, on the cluster at ``address`` or a local
             Ray instance; :mod:`uav_formation_env.distributed`). The numbers do not depend on it.
+            ``"torch"``: every variant's seeds as one batch of the torch episode layer on
+            ``device``, the variants one after another in this process (the DMPC
+            metaheuristics act on the device; :func:`~uav_formation_env.evaluation.run_episodes`).
+            The numbers agree with the numpy backend's to rounding, which can grow over an
+            episode (docs/architecture.md, "Backends").
         address: the Ray cluster (None: start a local instance).
         chunk_size: seeds per Ray task.
+        device: the torch device with ``backend="torch"`` (None: CUDA if available, else the
+            CPU); only with that backend.
     """
-    if backend not in ("local", "ray"):
-        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
+    if backend not in ("local", "ray", "torch"):
+        raise ValueError(f"backend must be 'local', 'ray' or 'torch', got {backend!r}")
+    if device is not None and backend != "torch":
+        raise ValueError(f"device={device!r} needs backend='torch' (got backend={backend!r})")
+    if backend == "torch":
+        device = torch_device(device)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     base = resolve_scenario(scenario)
@@ -124,6 +137,12 @@ def reproduce(
     if backend == "ray":
         batches = _run_all_ray(everything, base, seeds, duration, policy_seed, progress, address,
                                chunk_size)  # fmt: skip
+    elif backend == "torch":
+        jobs = 1
+        batches = {
+            v: run_variant(v, base, seeds, duration, policy_seed, progress, "torch", device)
+            for v in everything
+        }
     else:
         batches = _run_all(everything, base, seeds, duration, policy_seed, jobs, progress)
     wall = time.perf_counter() - start

@@ -93,8 +93,12 @@ def run_variant(
     duration: float | None = None,
     policy_seed: int | None = None,
     progress: Any = False,
+    array_backend: str = "numpy",
+    device: Any = None,
 ) -> EpisodeBatch:
-    """All seeds of one variant as one batch, with the Nash gap of its plans at every step."""
+    """All seeds of one variant as one batch, with the Nash gap of its plans at every step
+    (``array_backend`` and ``device``: those of :func:`~uav_formation_env.evaluation.run_episodes`).
+    """
     scenario = variant_scenario(base, variant, duration)
     policy = make_policy(variant_spec(variant)[0], scenario, seed=policy_seed)
     return run_episodes(
@@ -105,4 +109,6 @@ def run_variant(
         progress=progress,
         desc=variant_label(variant),
         nash_gap=True,
+        backend=array_backend,
+        device=device,
     )
