@@ -109,11 +109,18 @@ def test_population_cost_with_close_uavs_on_torch_equals_numpy(device: str) -> N
     np.testing.assert_allclose(taken[0], total.reshape(b * n, 40)[index], rtol=1e-10, atol=1e-8)
 
 
-def fly(backend: str, optimizer: str, seeds: list[int], steps: int, device: str = "cpu"):
+def fly(
+    backend: str,
+    optimizer: str,
+    seeds: list[int],
+    steps: int,
+    device: str = "cpu",
+    random: str = "generator",
+):
     scenario = paper_scenario()
     kwargs = {"device": device} if backend == "torch" else {}
     episodes = FormationEpisodes(scenario, len(seeds), backend=backend, **kwargs)
-    policy = NashDMPCPolicy(scenario, optimizer)
+    policy = NashDMPCPolicy(scenario, optimizer, random=random)
     policy.reset(len(seeds), seeds=seeds)
     step = episodes.reset(seed=seeds)
     states, actions = [], []
@@ -177,3 +184,31 @@ def test_runner_on_torch_records_the_numpy_episode() -> None:
         if name == "pio":
             np.testing.assert_array_equal(torch_run.triggered, numpy_run.triggered)
             assert torch_run.triggered.any()
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_counter_draws_fly_the_same_on_numpy_and_torch(device: str) -> None:
+    """random="counter": the numbers are computed on the device (no host generators), and the
+    torch episode equals the numpy one to rounding."""
+    z_np, u_np, policy_np = fly("numpy", "lfpio", [3, 8], 25, random="counter")
+    z, u, policy = fly("torch", "lfpio", [3, 8], 25, device, random="counter")
+    np.testing.assert_allclose(u, u_np, rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(z, z_np, rtol=1e-9, atol=1e-9)
+    assert policy.records().triggered.sum() > 0
+    # and they are not the generator's numbers
+    _, u_generator, _ = fly("numpy", "lfpio", [3, 8], 25)
+    assert np.abs(u_generator - u_np).max() > 1e-3
+
+
+def test_counter_draws_do_not_depend_on_the_batch() -> None:
+    """A seed flies the same alone and beside other seeds (each UAV's numbers are keyed by its
+    episode's seeds, itself and the step), with PIO, LFPIO and PSO."""
+    for optimizer in ("pio", "lfpio", "pso"):
+        _, together, _ = fly("numpy", optimizer, [11, 5, 2], 15, random="counter")
+        _, alone, _ = fly("numpy", optimizer, [5], 15, random="counter")
+        np.testing.assert_array_equal(alone[:, 0], together[:, 1])
+
+
+def test_unknown_random_source_is_named() -> None:
+    with pytest.raises(ValueError, match="random must be one of"):
+        NashDMPCPolicy(paper_scenario(), "lfpio", random="philox")

@@ -70,7 +70,11 @@ a tensor there; the random numbers are still drawn from the copies' numpy genera
 metaheuristics (PIO, LFPIO, PSO) and the full observation layout run; ``"exact"``, ``"nash"`` and
 the local layout are numpy-only.
 
-Randomness: one ``numpy.random.Generator`` per scenario copy. ``reset(batch_size, seeds)`` seeds
+Randomness: one ``numpy.random.Generator`` per scenario copy (``random="generator"``, the default
+and the paper reproduction's numbers), or counter-based draws (``random="counter"``: Philox keyed
+by each copy's episode and policy seeds, counted by (draw, UAV, control step); see
+:class:`~uav_formation_env.policies.dmpc_step.CounterKeys`), which a GPU computes where it uses
+them and numpy and torch compute alike. ``reset(batch_size, seeds)`` seeds
 copy b's stream from its episode's seed (and the policy's ``seed``, if given), so an episode
 named by its seed flies the same, bit for bit, alone or inside any batch (the runner and
 ``uav-formation evaluate`` pass the seeds). Without episode seeds the copies' streams are spawned
@@ -102,6 +106,7 @@ from uav_formation_env.core.observation import (
 )
 from uav_formation_env.policies.broadcast import shift_warm_start
 from uav_formation_env.policies.dmpc_step import (
+    CounterKeys,
     DMPCRecords,
     MetaheuristicSolver,
     StepRecord,
@@ -123,6 +128,8 @@ __all__ = [
 DEFAULT_THRESHOLD = 10.0  # event-trigger threshold on J_i(W) (docs/model.md §5) [-]
 
 POLICY_OPTIMIZERS = DMPC_OPTIMIZERS  # the solver names NashDMPCPolicy accepts (the registry's)
+
+RANDOM_SOURCES = ("generator", "counter")  # NashDMPCPolicy(random=...)
 
 
 class NashDMPCPolicy:
@@ -153,6 +160,9 @@ class NashDMPCPolicy:
             (:meth:`~uav_formation_env.core.cost.HorizonCost.terms` on every population). Both
             agree to rounding (~1e-13 relative); J_pre, J_exec and the never-worse-than-W check
             always use the direct evaluation.
+        random: ``"generator"`` (each copy's numpy generator, on the host) or ``"counter"``
+            (counter-based draws on the observations' device; a UAV's numbers depend only on
+            the seeds, itself and the step, not on the batch or on which other UAVs trigger).
     """
 
     def __init__(
@@ -163,7 +173,10 @@ class NashDMPCPolicy:
         threshold: float = DEFAULT_THRESHOLD,
         inner_rounds: int = 1,
         population_cost: str = "quadratic",
+        random: str = "generator",
     ) -> None:
+        if random not in RANDOM_SOURCES:
+            raise ValueError(f"random must be one of {RANDOM_SOURCES}, got {random!r}")
         if population_cost not in ("quadratic", "direct"):
             raise ValueError(
                 f"population_cost must be 'quadratic' or 'direct', got {population_cost!r}"
@@ -178,7 +191,9 @@ class NashDMPCPolicy:
         self.threshold = float(threshold)
         self.inner_rounds = int(inner_rounds)
         self.population_cost = population_cost
+        self.random = random
         self.seed = check_seed(seed, "seed")
+        self._keys: CounterKeys | None = None
         self._rngs: list[np.random.Generator] = []
         self._fresh = False  # reset() was called and no step taken since
         sc = self.scenario
@@ -227,6 +242,13 @@ class NashDMPCPolicy:
                     f"seeds must hold {batch_size} seeds (one per copy), got {len(seeds)}"
                 )
         self._rngs = copy_streams(int(batch_size), self.seed, seeds)
+        # counter keys: two words of each copy's seed sequence (from the same seeds as its
+        # stream; generating them leaves the stream untouched)
+        self._keys = CounterKeys(
+            np.stack(
+                [g.bit_generator.seed_seq.generate_state(2, np.uint32) for g in self._rngs]
+            ).astype(np.int64)
+        )
         self._fresh = True
         self._plans = np.zeros((int(batch_size), self.n_uav, self.horizon, 3))
         self._records = []
@@ -292,7 +314,9 @@ class NashDMPCPolicy:
         self._restart(decoded.time_fraction[:, 0] == 0.0, decoded.velocity.shape[1])
         assert self._plans is not None
         self._plans = as_float(self._plans, decoded.velocity)  # onto the observations' device
-        output, record = self._solver.step(decoded, self._plans, self.threshold, self._rngs)
+        source = self._keys if self.random == "counter" else self._rngs
+        assert source is not None
+        output, record = self._solver.step(decoded, self._plans, self.threshold, source)
         self._plans = output
         self._records.append(record)
         self._wall.append(time.perf_counter() - start)

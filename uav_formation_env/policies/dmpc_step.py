@@ -31,7 +31,7 @@ from typing import Protocol
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.array_api import copy, device, namespace_of, to_numpy
+from uav_formation_env.core.array_api import asarray_like, copy, device, namespace_of, to_numpy
 from uav_formation_env.core.observation import DecodedObservation
 from uav_formation_env.policies.best_response import ExactConfig, best_response
 from uav_formation_env.policies.broadcast import (
@@ -41,11 +41,18 @@ from uav_formation_env.policies.broadcast import (
     shift_warm_start,
 )
 from uav_formation_env.policies.nash import NashConfig, iterated_best_response
-from uav_formation_env.policies.optimizers import OptimConfig, RowStreams, minimise
+from uav_formation_env.policies.optimizers import (
+    CounterStreams,
+    OptimConfig,
+    RowStreams,
+    minimise,
+)
 from uav_formation_env.policies.registry import SolverConfig
 
 __all__ = [
+    "DRAWS_PER_ROUND",
     "BestResponseSolver",
+    "CounterKeys",
     "DMPCRecords",
     "ExactSolver",
     "MetaheuristicSolver",
@@ -55,6 +62,25 @@ __all__ = [
     "TriggeredRounds",
     "step_solver",
 ]
+
+
+DRAWS_PER_ROUND = 1024  # counter draw indices reserved per inner round (a solve makes <= 2 + 2 it)
+
+
+@dataclass(frozen=True)
+class CounterKeys:
+    """Counter-based randomness for a step: each copy's Philox key.
+
+    The triggered problem of UAV i in copy b at control step k draws with key ``keys[b]`` and
+    counter words (element, draw, i, k) (:class:`~uav_formation_env.policies.optimizers.
+    CounterStreams`), so its numbers depend on nothing else (not on the batch, nor on which
+    other UAVs trigger), and numpy and torch draw the same numbers.
+
+    Attributes:
+        keys: (B, 2) int64 key words in [0, 2^32).
+    """
+
+    keys: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -217,7 +243,7 @@ class StepSolver(Protocol):
         decoded: DecodedObservation,
         plans: np.ndarray,
         threshold: float,
-        rngs: Sequence[np.random.Generator],
+        rngs: Sequence[np.random.Generator] | CounterKeys,
     ) -> tuple[np.ndarray, StepRecord]:
         """Args: ``decoded`` the observations (B, N, dim) decoded; ``plans`` (B, N, H, 3) the
         plans broadcast at the last step; ``threshold`` the event trigger on J_i(W); ``rngs``
@@ -245,7 +271,7 @@ class TriggeredRounds:
         decoded: DecodedObservation,
         plans: np.ndarray,
         threshold: float,
-        rngs: Sequence[np.random.Generator],
+        rngs: Sequence[np.random.Generator] | CounterKeys,
     ) -> tuple[np.ndarray, StepRecord]:
         h = self.scenario.cost.horizon
         current = shift_warm_start(plans)  # W_i, and W_j as the receivers compute it
@@ -267,8 +293,7 @@ class TriggeredRounds:
             sub = problems.cost.take(index)  # the M triggered problems as one copy
             half = problems.half_width.reshape(-1, 3)[index][None]  # (1, M, 3)
             x0 = current.reshape(-1, h, 3)[index]
-            # index is ordered by copy; the row counts go to the host generators
-            streams = RowStreams(rngs, to_numpy(xp.sum(trig, axis=1)))
+            streams = self._streams(decoded, rngs, trig, index, round_)
             result_x, n_evals = self.solver.solve(HorizonProblems(sub, half), x0, streams)
             # Exact J_i of the solver's answer; keep W where it is not strictly better.
             found = sub.terms(result_x[None, :, None]).total[0, :, 0]
@@ -280,6 +305,27 @@ class TriggeredRounds:
             xp.reshape(j_cur, (-1,))[index[better]] = found[better]
             xp.reshape(evals, (-1,))[index] += n_evals
         return current, StepRecord.of(decoded, self.scenario, triggered, j_pre, j_cur, evals)
+
+    def _streams(
+        self,
+        decoded: DecodedObservation,
+        rngs: Sequence[np.random.Generator] | CounterKeys,
+        trig: np.ndarray,
+        index: np.ndarray,
+        round_: int,
+    ) -> RowStreams | CounterStreams:
+        """The random source of the triggered problems ``index`` (flat, ordered by copy)."""
+        xp = namespace_of(index)
+        if not isinstance(rngs, CounterKeys):  # the row counts go to the host generators
+            return RowStreams(rngs, to_numpy(xp.sum(trig, axis=1)))
+        n_uav = trig.shape[1]
+        dt = self.scenario.dynamics.dt
+        now = observed_time(decoded.time_fraction[:, 0], self.scenario.duration, dt)
+        step = xp.astype(xp.round(now / dt), index.dtype)  # (B,) the control step k
+        copy_of, uav = index // n_uav, index % n_uav
+        keys = asarray_like(rngs.keys, index)[copy_of]
+        labels = xp.stack((uav, step[copy_of]), axis=1)
+        return CounterStreams(keys, labels, first_draw=round_ * DRAWS_PER_ROUND)
 
 
 @dataclass(frozen=True)
@@ -299,7 +345,7 @@ class NashIteration:
         decoded: DecodedObservation,
         plans: np.ndarray,
         threshold: float,
-        rngs: Sequence[np.random.Generator],
+        rngs: Sequence[np.random.Generator] | CounterKeys,
     ) -> tuple[np.ndarray, StepRecord]:
         warm = shift_warm_start(plans)
         problems = horizon_problems(decoded, warm, self.scenario)

@@ -35,6 +35,7 @@ same stream as before).
 
 __all__ = [
     "COMPILED_AVAILABLE",
+    "CounterStreams",
     "FITNESS_EPS",
     "OPTIMIZERS",
     "LFPIOConfig",
@@ -71,4 +72,4 @@ from uav_formation_env.policies.optimizers.levy import (
 )
 from uav_formation_env.policies.optimizers.lfpio_kernels import COMPILED_AVAILABLE
 from uav_formation_env.policies.optimizers.population import fitness, weighted_centre
-from uav_formation_env.policies.optimizers.streams import RowStreams
+from uav_formation_env.policies.optimizers.streams import CounterStreams, RowStreams

@@ -18,7 +18,7 @@ from uav_formation_env.policies.optimizers.lfpio_kernels import (
 )
 from uav_formation_env.policies.optimizers.population import Population
 from uav_formation_env.policies.optimizers.search import lfpio_search, pio_search, pso_search
-from uav_formation_env.policies.optimizers.streams import RandomSource, RowStreams
+from uav_formation_env.policies.optimizers.streams import CounterStreams, RandomSource, RowStreams
 
 
 def minimise(
@@ -43,9 +43,11 @@ def minimise(
         x0: ``(*batch, *dims)`` warm start; it is pigeon 0 and the initial global best.
         low: Lower bounds, broadcastable to ``(*batch, *dims)``, finite.
         high: Upper bounds, broadcastable to ``(*batch, *dims)``, finite, ``>= low``.
-        rng: The only source of randomness: a generator, or
+        rng: The only source of randomness: a generator,
             :class:`~uav_formation_env.policies.optimizers.streams.RowStreams` (each problem's
-            draws from its own copy's generator).
+            draws from its own copy's generator) or
+            :class:`~uav_formation_env.policies.optimizers.streams.CounterStreams` (counter-based
+            draws on the device of its keys, which must be that of ``x0``).
         config: :class:`PIOConfig`, :class:`LFPIOConfig` or :class:`PSOConfig`.
         batch_ndim: How many leading axes of ``x0`` are batch axes (1 for ``(M, H, 3)``).
         compiled: Run LFPIO's per-iteration bookkeeping as compiled numba kernels (the same
@@ -62,9 +64,10 @@ def minimise(
         TypeError: If ``rng`` is not a ``numpy.random.Generator`` or ``config`` is unknown.
         ValueError: On bad bounds, ``batch_ndim`` or a cost of the wrong shape.
     """
-    if not isinstance(rng, np.random.Generator | RowStreams):
+    if not isinstance(rng, np.random.Generator | RowStreams | CounterStreams):
         raise TypeError(
-            f"rng must be a numpy.random.Generator or RowStreams, got {type(rng).__name__}"
+            "rng must be a numpy.random.Generator, RowStreams or CounterStreams, got "
+            f"{type(rng).__name__}"
         )
     run = Population(cost_fn, x0, low, high, batch_ndim)
     if isinstance(config, PIOConfig):

@@ -15,6 +15,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from uav_formation_env.core.array_api import namespace_of
+
 __all__ = [
     "DEFAULT_BETA",
     "TINY",
@@ -102,7 +104,8 @@ def levy_steps_into(rng: np.random.Generator, work: np.ndarray, beta: float) -> 
 
     Args:
         rng: Random generator (the only source of randomness).
-        work: ``(2, *shape)`` C-contiguous float64 buffer, overwritten.
+        work: ``(2, *shape)`` C-contiguous float64 buffer, overwritten (numpy, or a tensor
+            for a ``rng`` that draws on its device).
         beta: Stability exponent in (0, 2).
 
     Returns:
@@ -111,10 +114,11 @@ def levy_steps_into(rng: np.random.Generator, work: np.ndarray, beta: float) -> 
     sigma = mantegna_sigma(beta)
     rng.standard_normal(out=work)
     mu, nu = work[0], work[1]
-    np.multiply(mu, sigma, out=mu)
+    xp = namespace_of(work)
+    xp.multiply(mu, sigma, out=mu)
     levy_denominator_into(nu, beta)
-    np.maximum(nu, TINY, out=nu)
-    return np.divide(mu, nu, out=mu)
+    xp.maximum(nu, TINY, out=nu)
+    return xp.divide(mu, nu, out=mu)
 
 
 def levy_denominator_into(nu: np.ndarray, beta: float) -> np.ndarray:
@@ -124,12 +128,14 @@ def levy_denominator_into(nu: np.ndarray, beta: float) -> np.ndarray:
     up to an ulp or two (floating-point rounding; ``1/1.5`` is not exactly 2/3 in binary).
 
     Args:
-        nu: float64 array, overwritten.
+        nu: float64 array (numpy or torch), overwritten.
         beta: Stability exponent in (0, 2).
 
     Returns:
         ``nu``.
     """
+    if not isinstance(nu, np.ndarray):  # torch has no cbrt: the power, to an ulp or two
+        return nu.abs_().pow_(1.0 / beta)
     if beta == 1.5:
         np.multiply(nu, nu, out=nu)
         return np.cbrt(nu, out=nu)

@@ -10,12 +10,13 @@ import math
 
 import numpy as np
 
-from uav_formation_env.core.array_api import concat_into, copy, copy_where, device
+from uav_formation_env.core.array_api import concat_into, copy, copy_where, device, namespace_of
 from uav_formation_env.policies.optimizers.config import LFPIOConfig, PIOConfig, PSOConfig
 from uav_formation_env.policies.optimizers.levy import (
     levy_steps_into,
 )
 from uav_formation_env.policies.optimizers.population import Population, weighted_centre_into
+from uav_formation_env.policies.optimizers.streams import CounterStreams
 
 
 def pio_search(run: Population, rng: np.random.Generator, cfg: PIOConfig) -> None:
@@ -62,7 +63,10 @@ def lfpio_search(run: Population, rng: np.random.Generator, cfg: LFPIOConfig) ->
     cost = run.evaluate(x)
     v = xp.zeros_like(x)
     y2, to_best, to_centre, work = (xp.empty_like(x) for _ in range(4))
-    levy = np.empty((2, *x.shape))  # the Lévy draws: on the host, from the numpy generator
+    if isinstance(rng, CounterStreams):  # the Lévy draws: where the generator draws them
+        levy = xp.empty((2, *x.shape), dtype=x.dtype, device=device(x))
+    else:
+        levy = np.empty((2, *x.shape))
     both = xp.empty((run.nb, 2 * p, run.n), dtype=x.dtype, device=device(x))
     low, high = run.full_bounds(p)
     centre = weighted_centre_into(x, cost, cfg.center_divide_by_np, work)[:, None, :]
@@ -77,9 +81,9 @@ def lfpio_search(run: Population, rng: np.random.Generator, cfg: LFPIOConfig) ->
         xp.add(v, to_best, out=v)
         y1 = xp.add(x, v, out=x)  # Y1 = clip(X + V), written over X
         xp.minimum(xp.maximum(y1, low, out=y1), high, out=y1)
-        host = levy_steps_into(rng, levy, cfg.levy_beta)
-        np.multiply(cfg.levy_scale, host, out=host)
-        s = run.on_device(host)
+        drawn = levy_steps_into(rng, levy, cfg.levy_beta)
+        namespace_of(drawn).multiply(cfg.levy_scale, drawn, out=drawn)
+        s = run.on_device(drawn)
         xp.multiply(s, to_centre, out=s)
         xp.add(y1, s, out=y2)  # Y2 = clip(Y1 + r1 s ⊙ (X^c - X))
         xp.minimum(xp.maximum(y2, low, out=y2), high, out=y2)

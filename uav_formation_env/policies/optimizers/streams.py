@@ -1,4 +1,6 @@
-"""One random stream per scenario copy for a flat batch of optimisation problems.
+"""Random streams for a flat batch of optimisation problems: one per scenario copy
+(:class:`RowStreams`, numpy generators on the host) or one per problem (:class:`CounterStreams`,
+counter-based draws on the problems' device).
 
 A batched policy solves the triggered problems of every copy in one optimiser call. If they all
 drew from one generator, copy b's draws would depend on how many problems the other copies had
@@ -10,8 +12,12 @@ generator, so copy b's numbers depend only on its own seed and its own problems.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
+
+from uav_formation_env.core import counter_rng
+from uav_formation_env.core.array_api import device, namespace_of
 
 
 class RowStreams:
@@ -68,4 +74,60 @@ class RowStreams:
             raise ValueError(f"{name} must be the {self.rows} rows of the streams, got {rows}")
 
 
-RandomSource = np.random.Generator | RowStreams  # what the optimisers draw from
+class CounterStreams:
+    """A ``numpy.random.Generator`` stand-in whose numbers are Philox counter draws
+    (:mod:`uav_formation_env.core.counter_rng`), computed in the library and on the device of
+    its keys.
+
+    Row r's numbers are a function of its key, its two labels and the draw index only (the
+    draws of one :func:`~uav_formation_env.policies.optimizers.minimise` call are numbered from
+    ``first_draw``): they do not depend on the other rows, and numpy and torch give the same
+    uniforms bit for bit (normals to an ulp).
+
+    Args:
+        keys: (rows, 2) int64 key words of each row (e.g. its episode's seed).
+        labels: (rows, 2) int64 counter words of each row in [0, 2^32) (e.g. UAV, step).
+        first_draw: the draw index of the first call (e.g. distinct per inner round).
+    """
+
+    def __init__(self, keys: Any, labels: Any, first_draw: int = 0) -> None:
+        if keys.ndim != 2 or keys.shape[1] != 2 or tuple(labels.shape) != tuple(keys.shape):
+            raise ValueError(
+                f"keys and labels must both be (rows, 2), got {tuple(keys.shape)} and "
+                f"{tuple(labels.shape)}"
+            )
+        self.keys, self.labels, self.draw = keys, labels, int(first_draw)
+
+    @property
+    def rows(self) -> int:
+        """Total number of rows."""
+        return int(self.keys.shape[0])
+
+    def _words(self) -> Any:
+        xp = namespace_of(self.keys)
+        draw = xp.full((self.rows, 1), self.draw, dtype=self.keys.dtype, device=device(self.keys))
+        self.draw += 1
+        return xp.concat((draw, self.labels), axis=1)
+
+    def random(self, size: tuple[int, ...]) -> Any:
+        """U[0, 1) of shape ``size`` whose first axis is the rows (on the keys' device)."""
+        if size[0] != self.rows:
+            raise ValueError(f"size[0] must be the {self.rows} rows of the streams, got {size[0]}")
+        return counter_rng.uniform(self.keys, self._words(), tuple(size[1:]))
+
+    def standard_normal(self, out: Any) -> Any:
+        """Fill ``out`` ``(K, rows, ...)`` (numpy or a tensor) with N(0, 1); K = 2 for the Lévy
+        steps' mu and nu."""
+        if out.shape[1] != self.rows:
+            raise ValueError(
+                f"out.shape[1] must be the {self.rows} rows of the streams, got {out.shape[1]}"
+            )
+        drawn = counter_rng.standard_normal(
+            self.keys, self._words(), (out.shape[0], *out.shape[2:])
+        )  # (rows, K, ...)
+        xp = namespace_of(drawn)
+        out[...] = xp.permute_dims(drawn, (1, 0, *range(2, drawn.ndim)))
+        return out
+
+
+RandomSource = np.random.Generator | RowStreams | CounterStreams  # what the optimisers draw from
