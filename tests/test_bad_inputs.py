@@ -267,6 +267,8 @@ CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("device without torch", lambda t: ["evaluate", "--device", "cuda", "--duration", "1"], r"--device cuda needs --backend torch"),
     ("unknown device", lambda t: ["evaluate", "--backend", "torch", "--device", "gpu7", "--duration", "1"], r"device must name a torch device"),
     ("reproduce: device without torch", lambda t: ["reproduce", "--device", "cpu", "--quick", "--out", str(t)], r"needs backend='torch'"),
+    ("counter draws on ray", lambda t: ["evaluate", "--backend", "ray", "--random-source", "counter", "--duration", "1"], r"--random-source counter is not available with --backend ray"),
+    ("reproduce: counter draws on ray", lambda t: ["reproduce", "--backend", "ray", "--random-source", "counter", "--quick", "--out", str(t)], r"random='counter' is not available with backend='ray'"),
 ]  # fmt: skip
 
 

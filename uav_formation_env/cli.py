@@ -179,6 +179,8 @@ def _evaluate(args: argparse.Namespace) -> int:
                 f"--backend ray: scenario {scenario.name!r} draws N in {low}..{high}, which the "
                 "Ray runner does not split by N yet; use --backend local"
             )
+        if args.random_source != "generator":
+            raise ValueError("--random-source counter is not available with --backend ray")
         make_policy(args.policy, scenario, algo=args.algo)  # bad names fail here, not in a task
         with ray_session(args.address):
             batches = [
@@ -196,7 +198,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         options = {}
         if args.backend == "torch":
             options = {"backend": "torch", "device": torch_device(args.device)}
-        policy = make_policy(args.policy, scenario, algo=args.algo)
+        policy = make_policy(args.policy, scenario, algo=args.algo, random=args.random_source)
         batches = run_episode_groups(
             scenario,
             policy,
@@ -275,6 +277,7 @@ def _reproduce(args: argparse.Namespace) -> int:
         address=args.address,
         chunk_size=args.chunk_size,
         device=args.device,
+        random=args.random_source,
     )
     summary = result.summary
     print(f"wall time {summary['wall_time_s']:.1f} s ({len(summary['seeds'])} seeds)")
@@ -382,6 +385,14 @@ def _add_common(parser: argparse.ArgumentParser, model_scenario: bool = False) -
         "--device",
         default=None,
         help="torch device with --backend torch, e.g. cuda or cpu (None: cuda if available)",
+    )
+    parser.add_argument(
+        "--random-source",
+        choices=["generator", "counter"],
+        default="generator",
+        help="the DMPC optimisers' random numbers: each episode's numpy generator (the paper "
+        "reproduction's numbers), or counter-based draws made where the optimiser runs "
+        "(--backend torch on a GPU)",
     )
     parser.add_argument(
         "--address",

@@ -101,7 +101,11 @@ def solver_config(optimizer: str | SolverConfig) -> SolverConfig:
 
 
 def make_policy(
-    name: str, scenario: Scenario, seed: int | None = None, algo: str | None = None
+    name: str,
+    scenario: Scenario,
+    seed: int | None = None,
+    algo: str | None = None,
+    random: str = "generator",
 ) -> BatchPolicy:
     """A policy from a name of :data:`POLICY_NAMES` (see the module docstring) or the path of a
     stable-baselines3 model.
@@ -112,12 +116,15 @@ def make_policy(
         seed: the policy's own seed, mixed into the per-episode random streams of the DMPC
             optimisers and the random policy (None: the episode seeds alone decide).
         algo: stable-baselines3 algorithm of a model path (None: try each).
+        random: the DMPC optimisers' random numbers, ``"generator"`` (each copy's numpy
+            generator) or ``"counter"`` (counter-based, drawn on the observations' device); see
+            :class:`~uav_formation_env.policies.dmpc.NashDMPCPolicy`. Other policies ignore it.
     """
     key = name.lower()
     if key in DMPC_SOLVERS:
         from uav_formation_env.policies.dmpc import NashDMPCPolicy  # imports this module
 
-        return NashDMPCPolicy(scenario, key, seed=seed)
+        return NashDMPCPolicy(scenario, key, seed=seed, random=random)
     if key in _SIMPLE:
         return _SIMPLE[key](scenario, seed)
     path = Path(name)

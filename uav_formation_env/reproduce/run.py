@@ -46,12 +46,12 @@ from uav_formation_env.seeding import check_seed
 
 
 def _worker(args: tuple) -> tuple[str, EpisodeBatch]:
-    variant, base, seeds, duration, policy_seed, channel = args
+    variant, base, seeds, duration, policy_seed, random, channel = args
 
     def report(done: int) -> None:
         channel.put(done)
 
-    return variant, run_variant(variant, base, seeds, duration, policy_seed, report)
+    return variant, run_variant(variant, base, seeds, duration, policy_seed, report, random=random)
 
 
 @dataclass
@@ -78,6 +78,7 @@ def reproduce(
     address: str | None = None,
     chunk_size: int = 1,
     device: Any = None,
+    random: str = "generator",
 ) -> Reproduction:
     """Fly the four variants on the same seeds and write the tables, figures and report.
 
@@ -110,7 +111,12 @@ def reproduce(
         chunk_size: seeds per Ray task.
         device: the torch device with ``backend="torch"`` (None: CUDA if available, else the
             CPU); only with that backend.
+        random: the DMPC optimisers' random numbers, ``"generator"`` (each episode's numpy
+            generator: the paper reproduction's numbers) or ``"counter"`` (counter-based, drawn
+            where the optimiser runs: the fast choice on a GPU); not with ``backend="ray"``.
     """
+    if random != "generator" and backend == "ray":
+        raise ValueError(f"random={random!r} is not available with backend='ray'")
     if backend not in ("local", "ray", "torch"):
         raise ValueError(f"backend must be 'local', 'ray' or 'torch', got {backend!r}")
     if device is not None and backend != "torch":
@@ -140,11 +146,11 @@ def reproduce(
     elif backend == "torch":
         jobs = 1
         batches = {
-            v: run_variant(v, base, seeds, duration, policy_seed, progress, "torch", device)
+            v: run_variant(v, base, seeds, duration, policy_seed, progress, "torch", device, random)
             for v in everything
         }
     else:
-        batches = _run_all(everything, base, seeds, duration, policy_seed, jobs, progress)
+        batches = _run_all(everything, base, seeds, duration, policy_seed, jobs, progress, random)
     wall = time.perf_counter() - start
     all_batches = {v: batches[v] for v in everything}
     batches = {v: batches[v] for v in variants}
@@ -175,9 +181,13 @@ def _run_all(
     policy_seed: int | None,
     jobs: int,
     progress: bool,
+    random: str = "generator",
 ) -> dict[str, EpisodeBatch]:
     if jobs == 1:
-        return {v: run_variant(v, base, seeds, duration, policy_seed, progress) for v in variants}
+        return {
+            v: run_variant(v, base, seeds, duration, policy_seed, progress, random=random)
+            for v in variants
+        }
     # slowest first (LFPIO spends about twice PIO's evaluations)
     order = sorted(variants, key=lambda v: variant_spec(v)[0] not in ("lfpio", "nash"))
     n_steps = variant_scenario(base, variants[0], duration).n_steps
@@ -193,7 +203,7 @@ def _run_all(
         results: dict[str, EpisodeBatch] = {}
         with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
             futures = [
-                pool.submit(_worker, (v, base, seeds, duration, policy_seed, channel))
+                pool.submit(_worker, (v, base, seeds, duration, policy_seed, random, channel))
                 for v in order
             ]
             pending = set(futures)

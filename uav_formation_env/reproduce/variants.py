@@ -95,12 +95,14 @@ def run_variant(
     progress: Any = False,
     array_backend: str = "numpy",
     device: Any = None,
+    random: str = "generator",
 ) -> EpisodeBatch:
     """All seeds of one variant as one batch, with the Nash gap of its plans at every step
-    (``array_backend`` and ``device``: those of :func:`~uav_formation_env.evaluation.run_episodes`).
+    (``array_backend`` and ``device``: those of :func:`~uav_formation_env.evaluation.run_episodes`;
+    ``random``: that of :func:`~uav_formation_env.evaluation.make_policy`).
     """
     scenario = variant_scenario(base, variant, duration)
-    policy = make_policy(variant_spec(variant)[0], scenario, seed=policy_seed)
+    policy = make_policy(variant_spec(variant)[0], scenario, seed=policy_seed, random=random)
     return run_episodes(
         scenario,
         policy,
