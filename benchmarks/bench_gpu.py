@@ -8,11 +8,20 @@ Rows, each measured in this run:
   (``--batches``, eager; ``torch.compile`` of the step is not built yet), and VMAS
   ``simple_spread`` and ``navigation`` (N = 5 agents) at the same B when ``vmas`` is installed.
 
-Without a GPU it says so and measures the CPU rows only. Every figure is env-steps/s (copies x
-steps per second; one env-step moves all N UAVs, observations, rewards and the 20-tick observer
-included) with random actions and per-copy autoreset.
+Every figure is env-steps/s (copies x steps per second; one env-step moves all N UAVs,
+observations, rewards and the 20-tick observer included) with random actions and per-copy
+autoreset.
+
+Then the reference policy (LFPIO DMPC with the observer, ``--dmpc-batch`` copies, the policy and
+the episode layer together, seconds per control step): numpy with the numpy generators (the
+reference), torch on the CPU with the same generators and with counter draws, and on CUDA with
+both; and on CUDA the paper reproduction, ``uav-formation reproduce --backend torch
+--random-source counter`` of the 4 variants x ``--reproduce-seeds`` seeds (200 s episodes).
+
+Without a GPU it says so and measures the CPU rows only.
 
     python benchmarks/bench_gpu.py [--scenario paper] [--seconds 3] [--batches 4096 65536 262144]
+                                   [--dmpc-batch 100] [--dmpc-steps 10] [--reproduce-seeds 100]
 """
 
 from __future__ import annotations
@@ -75,12 +84,92 @@ def vmas_rate(name: str, batch: int, seconds: float, device: str) -> float | Non
     return batch * count / (time.perf_counter() - start)
 
 
+def dmpc_step_seconds(batch: int, steps: int, backend: str, device=None, random="generator"):
+    """Seconds per control step of the LFPIO DMPC and the episode layer, B copies of the paper
+    scenario (after 3 warm-up steps, so the first triggers and allocations are not counted)."""
+    from uav_formation_env.config_io import paper_scenario
+    from uav_formation_env.policies.dmpc import NashDMPCPolicy
+
+    scenario = paper_scenario()
+    episodes = FormationEpisodes(scenario, batch, backend=backend, device=device)
+    policy = NashDMPCPolicy(scenario, "lfpio", random=random)
+    seeds = list(range(batch))
+    policy.reset(batch, seeds=seeds)
+    step = episodes.reset(seed=seeds)
+    synchronize = lambda: None  # noqa: E731
+    if str(device).startswith("cuda"):
+        import torch
+
+        synchronize = torch.cuda.synchronize
+    for k in range(steps + 3):
+        if k == 3:
+            synchronize()
+            start = time.perf_counter()
+        step = episodes.step(policy.act_batch(step.observation))
+    synchronize()
+    return (time.perf_counter() - start) / steps
+
+
+def reproduce_seconds(seeds: int, device: str) -> float:
+    """Wall seconds of the paper reproduction's 4 variants x ``seeds`` seeds on the torch backend
+    with counter draws (no game variants, no progress bars)."""
+    import tempfile
+
+    from uav_formation_env.reproduce import reproduce
+
+    start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as out:
+        reproduce(
+            out,
+            seeds=range(seeds),
+            progress=False,
+            game_variants=(),
+            backend="torch",
+            device=device,
+            random="counter",
+        )
+    return time.perf_counter() - start
+
+
+def dmpc_rows(args, cuda: bool) -> None:
+    """The reference policy's table (seconds per control step, ratio to numpy)."""
+    cases = [("numpy, generator", "numpy", None, "generator")]
+    cases += [
+        ("torch cpu, generator", "torch", "cpu", "generator"),
+        ("torch cpu, counter", "torch", "cpu", "counter"),
+    ]
+    if cuda:
+        cases += [
+            ("torch cuda, generator", "torch", "cuda", "generator"),
+            ("torch cuda, counter", "torch", "cuda", "counter"),
+        ]
+    print(f"\nLFPIO DMPC + episode layer, paper scenario, B = {args.dmpc_batch} copies\n")
+    print("| backend, random numbers | s per control step | vs numpy |")
+    print("|---|---:|---:|")
+    reference = None
+    for label, backend, device, random in cases:
+        seconds = dmpc_step_seconds(args.dmpc_batch, args.dmpc_steps, backend, device, random)
+        reference = reference or seconds
+        print(f"| {label} | {seconds:.3f} | {reference / seconds:.2f}x |")
+    if cuda:
+        wall = reproduce_seconds(args.reproduce_seeds, "cuda")
+        print(
+            f"\nreproduce --backend torch --device cuda --random-source counter, 4 variants x "
+            f"{args.reproduce_seeds} seeds: {wall:.1f} s"
+        )
+    else:
+        print("\nno CUDA device: the CUDA DMPC rows and the reproduction's time are not measured")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="paper")
     parser.add_argument("--seconds", type=float, default=3.0, help="per measurement")
     parser.add_argument("--cpu-batch", type=int, default=4096)
     parser.add_argument("--batches", type=int, nargs="+", default=[4096, 65536, 262144, 1048576])
+    parser.add_argument("--dmpc-batch", type=int, default=100, help="copies of the DMPC rows")
+    parser.add_argument("--dmpc-steps", type=int, default=10, help="control steps per DMPC row")
+    parser.add_argument("--reproduce-seeds", type=int, default=100, help="seeds (CUDA only)")
     args = parser.parse_args()
     scenario = resolve_scenario(args.scenario)
     rows: list[tuple[str, int, float | None]] = []
@@ -119,6 +208,8 @@ def main() -> None:
             print(f"| {name} | {batch} | not installed | |")
         else:
             print(f"| {name} | {batch} | {rate:,.0f} | {rate / reference:.2f}x |")
+    if torch is not None and args.dmpc_steps > 0:
+        dmpc_rows(args, torch.cuda.is_available())
 
 
 if __name__ == "__main__":
