@@ -3,9 +3,10 @@
 Rows, each measured in this run:
 
 * the numpy episode layer at B = 1 and B = 4,096 (the reference every ratio is taken against);
-* the torch episode layer on the CPU at B = 4,096 (eager), same scenario, same physics;
+* the torch episode layer on the CPU at B = 4,096, eager and with ``compile=True`` (the
+  observer's ticks through ``torch.compile``; its compilation is not timed), same physics;
 * on CUDA, when a GPU is present: the torch episode layer at B = 4,096 ... 1,048,576
-  (``--batches``, eager; ``torch.compile`` of the step is not built yet), and VMAS
+  (``--batches``, eager and compiled), and VMAS
   ``simple_spread`` and ``navigation`` (N = 5 agents) at the same B when ``vmas`` is installed.
 
 Every figure is env-steps/s (copies x steps per second; one env-step moves all N UAVs,
@@ -35,9 +36,13 @@ from uav_formation_env.config_io import resolve_scenario
 from uav_formation_env.episode import FormationEpisodes
 
 
-def episode_rate(scenario, batch: int, seconds: float, backend: str, device=None) -> float:
+def episode_rate(
+    scenario, batch: int, seconds: float, backend: str, device=None, compile: bool = False
+) -> float:
     """env-steps/s of the episode layer with random actions in [-1, 1] and autoreset."""
-    episodes = FormationEpisodes(scenario, batch, autoreset=True, backend=backend, device=device)
+    episodes = FormationEpisodes(
+        scenario, batch, autoreset=True, backend=backend, device=device, compile=compile
+    )
     episodes.reset(seed=0)
     n = scenario.n_uav
     if backend == "torch":
@@ -185,15 +190,13 @@ def main() -> None:
         torch.set_num_threads(1)  # one core, as the numpy rows
         cpu = episode_rate(scenario, args.cpu_batch, args.seconds, "torch", "cpu")
         rows.append(("torch cpu (1 thread)", args.cpu_batch, cpu))
+        cpu = episode_rate(scenario, args.cpu_batch, args.seconds, "torch", "cpu", compile=True)
+        rows.append(("torch cpu (1 thread), compiled", args.cpu_batch, cpu))
         if torch.cuda.is_available():
             for batch in args.batches:
-                rows.append(
-                    (
-                        "torch cuda",
-                        batch,
-                        episode_rate(scenario, batch, args.seconds, "torch", "cuda"),
-                    )
-                )
+                for compile_ in (False, True):
+                    rate = episode_rate(scenario, batch, args.seconds, "torch", "cuda", compile_)
+                    rows.append(("torch cuda" + (", compiled" if compile_ else ""), batch, rate))
                 for name in ("simple_spread", "navigation"):
                     rows.append(
                         (f"vmas {name}", batch, vmas_rate(name, batch, args.seconds, "cuda"))

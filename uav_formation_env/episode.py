@@ -268,6 +268,8 @@ class FormationEpisodes:
         backend: ``"numpy"`` or ``"torch"``: the array library of the simulator and of every
             array an :class:`EpisodeStep` holds.
         device: the torch device (default CPU).
+        compile: the simulator's observer ticks through ``torch.compile`` (torch only; see
+            :class:`~uav_formation_env.sim.FormationSim`).
     """
 
     def __init__(
@@ -280,10 +282,16 @@ class FormationEpisodes:
         n_uav: int | None = None,
         backend: str = "numpy",
         device: object = None,
+        compile: bool = False,
     ) -> None:
         self.scenario = scenario
         self.sim = FormationSim(
-            scenario, batch_size=batch_size, n_uav=n_uav, backend=backend, device=device
+            scenario,
+            batch_size=batch_size,
+            n_uav=n_uav,
+            backend=backend,
+            device=device,
+            compile=compile,
         )
         self.xp = self.sim.xp
         self.batch_size = self.sim.batch_size

@@ -47,6 +47,7 @@ from uav_formation_env.core.initial import initial_positions
 from uav_formation_env.core.observer import (
     ObserverState,
     compensation,
+    compiled_observer_step_held,
     disturbance_estimate,
     observer_init,
     observer_step_held,
@@ -155,6 +156,9 @@ class FormationSim:
             N; a reset whose seed draws another N raises ValueError and changes nothing).
         backend: array library of the state, ``"numpy"`` or ``"torch"`` (float64 on both).
         device: where a torch state lives (``"cpu"``, ``"cuda"``, ...; default CPU); numpy: "cpu".
+        compile: run the observer's inner ticks through ``torch.compile`` (torch only; the first
+            step compiles; falls back to the eager loop with a warning where compilation is not
+            available; :func:`~uav_formation_env.core.observer.compiled_observer_step_held`).
     """
 
     def __init__(
@@ -164,9 +168,14 @@ class FormationSim:
         n_uav: int | None = None,
         backend: str = "numpy",
         device: object = None,
+        compile: bool = False,
     ) -> None:
         if not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        if compile and backend != "torch":
+            raise ValueError(f"compile=True needs backend='torch' (got backend={backend!r})")
+        # the observer's S ticks, the bulk of a step's arithmetic, through torch.compile
+        self._observer_held = compiled_observer_step_held if compile else observer_step_held
         self.xp = namespace_of_backend(backend)
         self.backend = backend
         self.device = backend_device(backend, device)
@@ -362,7 +371,7 @@ class FormationSim:
         d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust, self.copy_disturbance)
         a = u + d
         if obs_cfg.enabled:
-            self.observer = observer_step_held(
+            self.observer = self._observer_held(
                 self.observer, self.z[..., 3:], a, u, self.dt, obs_cfg
             )
         self.z = zoh_step(self.z, a, self.dt)
