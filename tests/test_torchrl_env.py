@@ -87,3 +87,11 @@ def test_bad_arguments_are_named():
         envs.torchrl_env("paper", num_envs=0)
     with pytest.raises(ValueError, match="device must name a torch device"):
         envs.torchrl_env("paper", device="moon")
+
+
+def test_compiled_env_passes_the_spec_check() -> None:
+    """torchrl_env(compile=True): the observer's ticks through torch.compile (3 copies: the
+    shapes test_backend_sim compiles for) and the same specs."""
+    env = envs.torchrl_env(num_envs=3, compile=True, seed=0)
+    assert env.episodes.sim._observer_held.__name__ == "compiled_observer_step_held"
+    check_env_specs(env)

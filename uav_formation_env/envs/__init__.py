@@ -86,6 +86,7 @@ def torchrl_env(
     seed: int | None = None,
     return_state: bool = True,
     n_uav: int | None = None,
+    compile: bool = False,
     **overrides: Any,
 ):
     """A batched TorchRL ``EnvBase`` of ``num_envs`` copies on the torch backend (CPU or CUDA):
@@ -99,6 +100,8 @@ def torchrl_env(
         seed: seed of the first reset.
         return_state: add the global state for centralised critics.
         n_uav: N of a scenario that draws N per reset.
+        compile: the simulator's observer ticks through ``torch.compile`` (falls back to the
+            eager loop with a warning where compilation is not available).
         **overrides: scenario fields, as for :func:`parallel_env`.
     """
     if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
@@ -107,7 +110,9 @@ def torchrl_env(
     from uav_formation_env.envs.torchrl_adapter import FormationTorchRLEnv
 
     resolved = resolve_with_overrides(scenario, overrides)
-    return FormationTorchRLEnv(resolved, int(num_envs), device, seed, return_state, n_uav)
+    return FormationTorchRLEnv(
+        resolved, int(num_envs), device, seed, return_state, n_uav, compile=compile
+    )
 
 
 __all__ = [

@@ -54,6 +54,8 @@ class FormationTorchRLEnv(EnvBase):
         seed: seed of the first reset (None: fresh entropy).
         return_state: add the global state for centralised critics.
         n_uav: N of a scenario that draws N per reset.
+        compile: the observer's ticks through ``torch.compile`` (see
+            :class:`~uav_formation_env.sim.FormationSim`).
     """
 
     def __init__(
@@ -64,9 +66,10 @@ class FormationTorchRLEnv(EnvBase):
         seed: int | None = None,
         return_state: bool = True,
         n_uav: int | None = None,
+        compile: bool = False,
     ) -> None:
         self.episodes = FormationEpisodes(
-            scenario, num_envs, n_uav=n_uav, backend="torch", device=device
+            scenario, num_envs, n_uav=n_uav, backend="torch", device=device, compile=compile
         )
         super().__init__(device=self.episodes.sim.device, batch_size=torch.Size([num_envs]))
         self.scenario = scenario
