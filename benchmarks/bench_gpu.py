@@ -3,10 +3,11 @@
 Rows, each measured in this run:
 
 * the numpy episode layer at B = 1 and B = 4,096 (the reference every ratio is taken against);
-* the torch episode layer on the CPU at B = 4,096, eager and with ``compile=True`` (the
-  observer's ticks through ``torch.compile``; its compilation is not timed), same physics;
+* the torch episode layer on the CPU at B = 4,096: eager, with ``compile=True`` (the
+  observer's ticks through ``torch.compile``; its compilation is not timed), and also with
+  ``noise="counter"`` (the disturbance noise drawn on the device), same physics;
 * on CUDA, when a GPU is present: the torch episode layer at B = 4,096 ... 1,048,576
-  (``--batches``, eager and compiled), and VMAS
+  (``--batches``, eager with host noise, and compiled with counter noise), and VMAS
   ``simple_spread`` and ``navigation`` (N = 5 agents) at the same B when ``vmas`` is installed.
 
 Every figure is env-steps/s (copies x steps per second; one env-step moves all N UAVs,
@@ -37,11 +38,23 @@ from uav_formation_env.episode import FormationEpisodes
 
 
 def episode_rate(
-    scenario, batch: int, seconds: float, backend: str, device=None, compile: bool = False
+    scenario,
+    batch: int,
+    seconds: float,
+    backend: str,
+    device=None,
+    compile: bool = False,
+    noise: str = "generator",
 ) -> float:
     """env-steps/s of the episode layer with random actions in [-1, 1] and autoreset."""
     episodes = FormationEpisodes(
-        scenario, batch, autoreset=True, backend=backend, device=device, compile=compile
+        scenario,
+        batch,
+        autoreset=True,
+        backend=backend,
+        device=device,
+        compile=compile,
+        noise=noise,
     )
     episodes.reset(seed=0)
     n = scenario.n_uav
@@ -192,11 +205,16 @@ def main() -> None:
         rows.append(("torch cpu (1 thread)", args.cpu_batch, cpu))
         cpu = episode_rate(scenario, args.cpu_batch, args.seconds, "torch", "cpu", compile=True)
         rows.append(("torch cpu (1 thread), compiled", args.cpu_batch, cpu))
+        cpu = episode_rate(scenario, args.cpu_batch, args.seconds, "torch", "cpu", True, "counter")
+        rows.append(("torch cpu (1 thread), compiled, counter noise", args.cpu_batch, cpu))
         if torch.cuda.is_available():
             for batch in args.batches:
-                for compile_ in (False, True):
-                    rate = episode_rate(scenario, batch, args.seconds, "torch", "cuda", compile_)
-                    rows.append(("torch cuda" + (", compiled" if compile_ else ""), batch, rate))
+                for compile_, noise in ((False, "generator"), (True, "counter")):
+                    rate = episode_rate(
+                        scenario, batch, args.seconds, "torch", "cuda", compile_, noise
+                    )
+                    label = ", compiled, counter noise" if compile_ else ""
+                    rows.append(("torch cuda" + label, batch, rate))
                 for name in ("simple_spread", "navigation"):
                     rows.append(
                         (f"vmas {name}", batch, vmas_rate(name, batch, args.seconds, "cuda"))

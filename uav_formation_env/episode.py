@@ -270,6 +270,8 @@ class FormationEpisodes:
         device: the torch device (default CPU).
         compile: the simulator's observer ticks through ``torch.compile`` (torch only; see
             :class:`~uav_formation_env.sim.FormationSim`).
+        noise: the simulator's disturbance noise, ``"generator"`` or ``"counter"`` (see
+            :class:`~uav_formation_env.sim.FormationSim`).
     """
 
     def __init__(
@@ -283,6 +285,7 @@ class FormationEpisodes:
         backend: str = "numpy",
         device: object = None,
         compile: bool = False,
+        noise: str = "generator",
     ) -> None:
         self.scenario = scenario
         self.sim = FormationSim(
@@ -292,6 +295,7 @@ class FormationEpisodes:
             backend=backend,
             device=device,
             compile=compile,
+            noise=noise,
         )
         self.xp = self.sim.xp
         self.batch_size = self.sim.batch_size
@@ -448,7 +452,12 @@ class FormationEpisodes:
         if self._flight is None:
             sim = self.sim
             self._flight = FormationSim(
-                self.scenario, self.batch_size, self.n_uav, sim.backend, sim.device
+                self.scenario,
+                self.batch_size,
+                self.n_uav,
+                sim.backend,
+                sim.device,
+                noise=sim.noise_source,
             )
             self._flight.adopt(np.ones(self.batch_size, dtype=bool), self.sim)
         flight, cfg = self._flight, self.scenario

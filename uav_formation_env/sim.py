@@ -19,7 +19,10 @@ Backends (docs/architecture.md, "Backends"): ``backend="numpy"`` (default) or ``
 device. The state and every array of a :class:`StepResult` live on the backend's device; the core
 functions are the same array-API code on both. Randomness stays on the host: each copy's numpy
 Generator draws its scene, start and noise blocks exactly as on numpy, and the drawn values are
-moved to the device, so a seed names the same episode on both backends.
+moved to the device, so a seed names the same episode on both backends. With ``noise="counter"``
+the disturbance noise of step k is instead a counter-based draw
+(:mod:`~uav_formation_env.core.counter_rng`) keyed by the copy's seed and counted by k, computed
+on the device each step (no host loop over copies); numpy and torch draw the same numbers.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from dataclasses import dataclass, fields, is_dataclass, replace
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core import topology
+from uav_formation_env.core import counter_rng, topology
 from uav_formation_env.core.array_api import (
     amin,
     backend_device,
@@ -59,6 +62,7 @@ from uav_formation_env.scenes import max_gust_std, max_obstacles, n_uav_range, s
 from uav_formation_env.seeding import check_seed
 
 NOISE_BLOCK = 100  # control steps of disturbance noise drawn per Generator call
+NOISE_SOURCES = ("generator", "counter")  # FormationSim(noise=...)
 
 SeedLike = int | Sequence[int] | None
 
@@ -159,6 +163,10 @@ class FormationSim:
         compile: run the observer's inner ticks through ``torch.compile`` (torch only; the first
             step compiles; falls back to the eager loop with a warning where compilation is not
             available; :func:`~uav_formation_env.core.observer.compiled_observer_step_held`).
+        noise: the disturbance noise, ``"generator"`` (blocks from each copy's numpy generator,
+            moved to the device: the paper reproduction's numbers) or ``"counter"`` (counter-based
+            draws on the device, keyed by each copy's seed and counted by its step; a seed names
+            the same scene and start either way, not the same noise).
     """
 
     def __init__(
@@ -169,9 +177,13 @@ class FormationSim:
         backend: str = "numpy",
         device: object = None,
         compile: bool = False,
+        noise: str = "generator",
     ) -> None:
         if not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        if noise not in NOISE_SOURCES:
+            raise ValueError(f"noise must be one of {NOISE_SOURCES}, got {noise!r}")
+        self.noise_source = noise
         if compile and backend != "torch":
             raise ValueError(f"compile=True needs backend='torch' (got backend={backend!r})")
         # the observer's S ticks, the bulk of a step's arithmetic, through torch.compile
@@ -221,6 +233,7 @@ class FormationSim:
         self.gust = np.zeros((B, N, 3))  # Gauss-Markov gust [m/s^2]
         self.noise = np.zeros((B, NOISE_BLOCK, N, self.disturbance.noise_dim))  # drawn noise
         self.noise_pos = np.zeros(B, dtype=np.int64)  # next unused noise step per copy
+        self.noise_keys = np.zeros((B, 2), dtype=np.int64)  # noise="counter": per-copy keys
         self._noise_left = NOISE_BLOCK  # steps until some copy needs a new noise block
         self.t = np.zeros(B)  # time since reset [s]
         self.route_start = np.zeros((B, 3))  # formation centroid at t = 0: the route's start [m]
@@ -233,7 +246,7 @@ class FormationSim:
         if backend != "numpy":  # everything the step reads, on the device
             for name in ("offsets", "base_adjacency", "obstacle_centers", "obstacle_radii"):
                 setattr(self, name, self._put(getattr(self, name)))
-            for name in ("z", "gust", "t", "route_start", "steps"):
+            for name in ("z", "gust", "t", "route_start", "steps", "noise_keys"):
                 setattr(self, name, self._put(getattr(self, name)))
             self.obstacles = self._put_fields(self.obstacles)
             self.copy_disturbance = self._put_fields(self.copy_disturbance)
@@ -301,6 +314,7 @@ class FormationSim:
         # the reset copies' starts, drawn on the host in the same order on every backend
         z = np.empty((len(draws), N, 6))
         gust = np.empty((len(draws), N, 3))
+        keys = np.zeros((len(draws), 2), dtype=np.int64)
         for row, (b, stream, rng, scene) in enumerate(draws):
             self._seed_streams[b], self._rngs[b], self.scenes[b] = stream, rng, scene
             initial = scene.initial
@@ -310,11 +324,15 @@ class FormationSim:
             if cfg.scene is not None:
                 self._set_scene(b, scene)
             gust[row] = self.disturbance.initial_gust(rng, scene.disturbance.gust_std)
-            self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)
+            if self.noise_source == "counter":
+                keys[row] = rng.integers(0, 2**32, size=2, dtype=np.int64)
+            else:
+                self.noise[b] = self.disturbance.draw_noise(rng, NOISE_BLOCK)
         self.noise_pos[mask] = 0
         self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
         at = self._put(indices)
         self.z[at], self.gust[at] = self._put(z), self._put(gust)
+        self.noise_keys[at] = self._put(keys)
         self.route_start[at] = self._put(z[:, :, :3].mean(axis=1))
         self.t[at] = 0.0
         self.steps[at] = 0
@@ -367,7 +385,7 @@ class FormationSim:
         u_n = xp.minimum(xp.maximum(u_n, -u_max), u_max)
         u_d = compensation(self.observer, obs_cfg) if obs_cfg.enabled else xp.zeros_like(u_n)
         u = xp.minimum(xp.maximum(u_n + u_d, -u_max), u_max)
-        noise = self._put(self.noise[self._rows, self.noise_pos])
+        noise = self._step_noise()
         d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust, self.copy_disturbance)
         a = u + d
         if obs_cfg.enabled:
@@ -384,7 +402,28 @@ class FormationSim:
         self.last = result
         return result
 
+    def _step_noise(self):
+        """(B, N, noise_dim) the standard noise of this step: from the host blocks, or counter
+        draws keyed by each copy's key and counted by its step k (U[0, 1) columns with word
+        (k, 0, 0), N(0, 1) columns with (k, 1, 0))."""
+        if self.noise_source != "counter":
+            return self._put(self.noise[self._rows, self.noise_pos])
+        xp, disturbance, keys = self.xp, self.disturbance, self.noise_keys
+        zero = xp.zeros_like(self.steps)
+        parts = [self.z[..., :0]]  # (B, N, 0): the noise of a layout without noise columns
+        if disturbance.uniform_dim:
+            words = xp.stack((self.steps, zero, zero), axis=1)
+            size = (self.n_uav, disturbance.uniform_dim)
+            parts.append(counter_rng.uniform(keys, words, size))
+        if disturbance.gust_dim:
+            words = xp.stack((self.steps, zero + 1, zero), axis=1)
+            size = (self.n_uav, disturbance.gust_dim)
+            parts.append(counter_rng.standard_normal(keys, words, size))
+        return xp.concat(parts, axis=-1)
+
     def _advance_noise(self) -> None:
+        if self.noise_source == "counter":
+            return
         self.noise_pos += 1
         # steps until the most advanced copy runs out of noise: no array reduction per step
         self._noise_left -= 1
@@ -492,10 +531,12 @@ class FormationSim:
                 "adopt() needs a source that has been reset, and a reset target unless every "
                 "copy is adopted"
             )
+        if source.noise_source != self.noise_source:
+            raise ValueError("adopt needs a source simulator of the same noise source")
         for name in ("noise", "noise_pos"):  # on the host
             getattr(self, name)[mask] = getattr(source, name)[mask]
         on = self._put(mask)
-        for name in ("z", "gust", "t", "steps", "route_start"):
+        for name in ("z", "gust", "t", "steps", "route_start", "noise_keys"):
             getattr(self, name)[on] = getattr(source, name)[on]
         if self.scenario.scene is not None:
             assert self.obstacles is not None and source.obstacles is not None

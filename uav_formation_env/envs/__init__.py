@@ -87,6 +87,7 @@ def torchrl_env(
     return_state: bool = True,
     n_uav: int | None = None,
     compile: bool = False,
+    noise: str = "generator",
     **overrides: Any,
 ):
     """A batched TorchRL ``EnvBase`` of ``num_envs`` copies on the torch backend (CPU or CUDA):
@@ -102,6 +103,8 @@ def torchrl_env(
         n_uav: N of a scenario that draws N per reset.
         compile: the simulator's observer ticks through ``torch.compile`` (falls back to the
             eager loop with a warning where compilation is not available).
+        noise: ``"generator"`` (host blocks) or ``"counter"`` (counter-based draws on the
+            device) disturbance noise; see :class:`~uav_formation_env.sim.FormationSim`.
         **overrides: scenario fields, as for :func:`parallel_env`.
     """
     if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
@@ -111,7 +114,7 @@ def torchrl_env(
 
     resolved = resolve_with_overrides(scenario, overrides)
     return FormationTorchRLEnv(
-        resolved, int(num_envs), device, seed, return_state, n_uav, compile=compile
+        resolved, int(num_envs), device, seed, return_state, n_uav, compile=compile, noise=noise
     )
 
 

@@ -56,6 +56,8 @@ class FormationTorchRLEnv(EnvBase):
         n_uav: N of a scenario that draws N per reset.
         compile: the observer's ticks through ``torch.compile`` (see
             :class:`~uav_formation_env.sim.FormationSim`).
+        noise: ``"generator"`` or ``"counter"`` disturbance noise (see
+            :class:`~uav_formation_env.sim.FormationSim`; counter draws stay on the device).
     """
 
     def __init__(
@@ -67,9 +69,16 @@ class FormationTorchRLEnv(EnvBase):
         return_state: bool = True,
         n_uav: int | None = None,
         compile: bool = False,
+        noise: str = "generator",
     ) -> None:
         self.episodes = FormationEpisodes(
-            scenario, num_envs, n_uav=n_uav, backend="torch", device=device, compile=compile
+            scenario,
+            num_envs,
+            n_uav=n_uav,
+            backend="torch",
+            device=device,
+            compile=compile,
+            noise=noise,
         )
         super().__init__(device=self.episodes.sim.device, batch_size=torch.Size([num_envs]))
         self.scenario = scenario
