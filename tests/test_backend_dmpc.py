@@ -212,3 +212,13 @@ def test_counter_draws_do_not_depend_on_the_batch() -> None:
 def test_unknown_random_source_is_named() -> None:
     with pytest.raises(ValueError, match="random must be one of"):
         NashDMPCPolicy(paper_scenario(), "lfpio", random="philox")
+
+
+def test_readme_gpu_reproduction_command_runs_on_the_cpu(tmp_path) -> None:
+    """The README's GPU command, with --device cpu, one seed and two steps."""
+    from uav_formation_env.cli import main
+
+    argv = ["reproduce", "--seeds", "1", "--duration", "0.4", "--backend", "torch"]
+    argv += ["--device", "cpu", "--random-source", "counter", "--game-variants", "none"]
+    assert main([*argv, "--quiet", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "table2.csv").is_file()
