@@ -200,7 +200,8 @@ def run_episodes(
         t0 = time.perf_counter()
         seen = obs if tensors else to_numpy(obs)
         # whose plans each UAV receives: communication metadata, not the observation
-        extra = (step.neighbour_index,) if links else ()
+        index = step.neighbour_index
+        extra = ((index if tensors or index is None else to_numpy(index)),) if links else ()
         actions = policy.act_batch(seen, *extra)
         if not tensors:
             actions = np.asarray(actions, dtype=float)
