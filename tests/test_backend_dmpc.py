@@ -152,7 +152,7 @@ def test_closed_loop_dmpc_on_torch_equals_numpy(optimizer: str, device: str) -> 
 
 
 def test_numpy_only_solvers_refuse_tensor_observations() -> None:
-    """'exact' (and the local layout) are numpy-only: a tensor observation gets a message that
+    """'exact' is numpy-only: a tensor observation gets a message that
     says so, and the policy still acts on numpy afterwards."""
     scenario = paper_scenario()
     episodes = FormationEpisodes(scenario, 1, backend="torch")
@@ -222,3 +222,28 @@ def test_readme_gpu_reproduction_command_runs_on_the_cpu(tmp_path) -> None:
     argv += ["--device", "cpu", "--random-source", "counter", "--game-variants", "none"]
     assert main([*argv, "--quiet", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "table2.csv").is_file()
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_local_layout_dmpc_on_torch_equals_numpy(device: str) -> None:
+    """The N-independent local observation: the torch policy decodes its slots and exchanges
+    plans through the neighbour index on the device, and flies the numpy episode."""
+    from uav_formation_env.config_io import with_overrides
+
+    scenario = with_overrides(paper_scenario(), {"observation.kind": "local"})
+    runs = []
+    for backend in ("numpy", "torch"):
+        kwargs = {"device": device} if backend == "torch" else {}
+        episodes = FormationEpisodes(scenario, 2, backend=backend, **kwargs)
+        policy = NashDMPCPolicy(scenario, "lfpio")
+        policy.reset(2, seeds=[3, 8])
+        step = episodes.reset(seed=[3, 8])
+        states = []
+        for _ in range(15):
+            action = policy.act_batch(step.observation, step.neighbour_index)
+            step = episodes.step(action)
+            states.append(to_numpy(step.result.z).copy())
+        assert isinstance(action, torch.Tensor) == (backend == "torch")
+        assert policy.records().triggered.sum() > 0
+        runs.append(np.stack(states))
+    np.testing.assert_allclose(runs[1], runs[0], rtol=1e-9, atol=1e-9)

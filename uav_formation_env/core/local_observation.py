@@ -75,6 +75,7 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.array_api import (
+    as_float,
     asarray_like,
     clip_in_place,
     constant_like,
@@ -553,8 +554,8 @@ def decode_local_observations(
 ) -> DecodedLocalObservation:
     """Undo the scaling of :func:`build_local_observations` (the unclipped slots exactly).
 
-    numpy only (the decoding policies are numpy policies): move a torch ``obs`` to the host first
-    (``array_api.to_numpy``).
+    numpy or torch: the decoded arrays are float64 in the library and on the device of ``obs``
+    (a torch ``neighbour_index`` stays a tensor there too).
 
     Neighbour and proximity slots decode alike: the UAV slot arrays have k + nearest entries.
 
@@ -567,19 +568,21 @@ def decode_local_observations(
             the same step (kept as given; needed by policies that exchange plans).
     """
     dim = local_observation_dim(k, m, nearest)
-    obs = np.asarray(obs, dtype=float)
+    obs = as_float(obs)
+    xp = namespace_of(obs)
+    if not is_numpy(xp):
+        obs = xp.astype(obs, xp.float64)
     if obs.shape[-1] != dim:
         raise ValueError(
-            f"expected a last axis of {dim} (k={k}, m={m}, nearest={nearest}), got {obs.shape}"
+            f"expected a last axis of {dim} (k={k}, m={m}, nearest={nearest}), got "
+            f"{tuple(obs.shape)}"
         )
-    lead = obs.shape[:-1]
+    lead = tuple(obs.shape[:-1])
     slots = k + nearest
     end = OWN_DIM + NEIGHBOUR_DIM * slots
     nb = obs[..., OWN_DIM:end].reshape(*lead, slots, NEIGHBOUR_DIM)
     ob = obs[..., end:].reshape(*lead, m, OBSTACLE_DIM)
-    relative = np.concatenate(
-        (nb[..., 5:8] * FORMATION_SCALE, nb[..., 8:11] * VELOCITY_SCALE), axis=-1
-    )
+    relative = xp.concat((nb[..., 5:8] * FORMATION_SCALE, nb[..., 8:11] * VELOCITY_SCALE), axis=-1)
     return DecodedLocalObservation(
         velocity=obs[..., 0:3] * VELOCITY_SCALE,
         velocity_error=obs[..., 3:6] * VELOCITY_SCALE,
@@ -604,14 +607,22 @@ def decode_local_observations(
     )
 
 
-def _checked_index(neighbour_index: np.ndarray, obs: np.ndarray, k: int) -> np.ndarray:
-    index = np.asarray(neighbour_index)
-    if index.shape != (*obs.shape[:-1], k) or index.dtype.kind not in "iu":
+def _checked_index(neighbour_index: Any, obs: Any, k: int) -> Any:
+    """``neighbour_index`` as int64 in the library and on the device of ``obs``, shape-checked."""
+    expected = (*obs.shape[:-1], k)
+    if isinstance(obs, np.ndarray):
+        index = np.asarray(neighbour_index)
+        integral = index.dtype.kind in "iu"
+    else:
+        xp = namespace_of(obs)
+        index = xp.asarray(neighbour_index, device=device(obs))
+        integral = xp.isdtype(index.dtype, "integral")
+    if tuple(index.shape) != expected or not integral:
         raise ValueError(
-            f"neighbour_index must be integers of shape {(*obs.shape[:-1], k)}, got "
-            f"{index.dtype} {index.shape}"
+            f"neighbour_index must be integers of shape {expected}, got {index.dtype} "
+            f"{tuple(index.shape)}"
         )
-    return index.astype(np.int64)
+    return index.astype(np.int64) if isinstance(index, np.ndarray) else index.long()
 
 
 ABSENT_DISTANCE = 1e6  # where an absent slot's UAV is put in a slot frame: never within reach [m]
@@ -643,21 +654,23 @@ class SlotFrame:
 
 
 def slot_frame(decoded: DecodedLocalObservation) -> SlotFrame:
-    """The :class:`SlotFrame` of decoded local observations (leading dims kept; numpy only)."""
+    """The :class:`SlotFrame` of decoded local observations (leading dims kept; numpy or
+    torch, the library of the decoded arrays)."""
     velocity = decoded.velocity
-    own = np.concatenate((np.zeros_like(velocity), velocity), axis=-1)
+    xp = namespace_of(velocity)
+    own = xp.concat((xp.zeros_like(velocity), velocity), axis=-1)
     present = decoded.slot_present
     error = decoded.relative_formation_error  # (..., k, 6) a_j - a_i
-    position = np.where(present[..., None], decoded.relative_position, ABSENT_DISTANCE)
-    slots = np.concatenate((position, velocity[..., None, :] + error[..., 3:]), axis=-1)
-    slot_offsets = np.zeros_like(slots)
+    position = xp.where(present[..., None], decoded.relative_position, ABSENT_DISTANCE)
+    slots = xp.concat((position, velocity[..., None, :] + error[..., 3:]), axis=-1)
+    slot_offsets = xp.zeros_like(slots)
     slot_offsets[..., :3] = position - error[..., :3]
     return SlotFrame(
         own=own,
         slots=slots,
         slot_offsets=slot_offsets,
-        adjacency=(decoded.neighbour & present).astype(float),
-        present=present.astype(float),
+        adjacency=xp.astype(decoded.neighbour & present, velocity.dtype),
+        present=xp.astype(present, velocity.dtype),
     )
 
 

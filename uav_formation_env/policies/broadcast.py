@@ -14,8 +14,7 @@ non-neighbour's view is predicted with zero inputs and enters J_i only through t
 observed relative formation error plus the mission offsets, ``p^d_j - p^d_i``.
 
 Shapes: B copies, N UAVs (receivers i and senders j), H horizon steps. Arrays are numpy or torch
-(the library and device of the decoded observations; the full layout on torch, the local layout
-on numpy).
+(the library and device of the decoded observations), on either observation layout.
 """
 
 from __future__ import annotations
@@ -101,8 +100,9 @@ def observed_schedule(decoded: DecodedLocalObservation, now: np.ndarray) -> Copy
         decoded: (B, N) decoded local observations.
         now: (B·N,) each UAV's observed time [s].
     """
-    switch = np.round((now + decoded.time_to_switch.reshape(-1)) / SWITCH_TIME_GRID)
-    legs = np.stack([decoded.reference_velocity, decoded.next_velocity], axis=-2)
+    xp = namespace_of(now)
+    switch = xp.round((now + decoded.time_to_switch.reshape(-1)) / SWITCH_TIME_GRID)
+    legs = xp.stack([decoded.reference_velocity, decoded.next_velocity], axis=-2)
     return CopySchedules(
         times=(switch * SWITCH_TIME_GRID)[:, None], velocities=legs.reshape(-1, 2, 3)
     )
@@ -192,10 +192,13 @@ def received_slot_plans(
     Returns:
         (B, N_recv, k, H, 3) [m/s^2].
     """
+    xp = namespace_of(plans)
     batch = plans.shape[0]
-    copies = np.arange(batch).reshape(batch, 1, 1)
-    gathered = plans[copies, np.maximum(neighbour_index, 0)]  # (B, N_recv, k, H, 3)
-    return np.where(adjacency[..., None, None] > 0, gathered, 0.0)
+    copies = xp.reshape(xp.arange(batch, device=device(plans)), (batch, 1, 1))
+    index = neighbour_index
+    index = xp.where(index > 0, index, 0)  # absent slots (-1) read row 0, masked below
+    gathered = plans[copies, index]  # (B, N_recv, k, H, 3)
+    return xp.where(adjacency[..., None, None] > 0, gathered, 0.0)
 
 
 def horizon_problems(

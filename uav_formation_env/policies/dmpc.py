@@ -67,8 +67,8 @@ layer's ``backend="torch"``). With tensors the decoded observations, every UAV's
 the populations and the broadcast plans stay in torch on that device and the actions come back as
 a tensor there; the random numbers are still drawn from the copies' numpy generators on the host
 (the same numbers as on numpy, so a seed flies the same episode to rounding). On torch the
-metaheuristics (PIO, LFPIO, PSO) and the full observation layout run; ``"exact"``, ``"nash"`` and
-the local layout are numpy-only.
+metaheuristics (PIO, LFPIO, PSO) run, on either observation layout; ``"exact"`` and ``"nash"``
+are numpy-only.
 
 Randomness: one ``numpy.random.Generator`` per scenario copy (``random="generator"``, the default
 and the paper reproduction's numbers), or counter-based draws (``random="counter"``: Philox keyed
@@ -257,12 +257,10 @@ class NashDMPCPolicy:
     @property
     def accepts_tensors(self) -> bool:
         """Whether :meth:`act_batch` takes torch observations and acts on their device (the
-        metaheuristics on the full layout; see "Backends" in the module docstring)."""
+        metaheuristics; see "Backends" in the module docstring)."""
         solver = self._solver
-        return (
-            not self.local
-            and isinstance(solver, TriggeredRounds)
-            and isinstance(solver.solver, MetaheuristicSolver)
+        return isinstance(solver, TriggeredRounds) and isinstance(
+            solver.solver, MetaheuristicSolver
         )
 
     @property
@@ -330,9 +328,8 @@ class NashDMPCPolicy:
             obs = np.asarray(obs, dtype=np.float64)
         elif not self.accepts_tensors:
             raise ValueError(
-                "obs is a tensor, but this policy runs on numpy only (the local observation "
-                "layout, 'exact' and 'nash' are numpy-only; PIO, LFPIO and PSO on the full "
-                "layout run on torch); pass numpy observations"
+                "obs is a tensor, but this policy runs on numpy only ('exact' and 'nash' are "
+                "numpy-only; PIO, LFPIO and PSO run on torch); pass numpy observations"
             )
         xp = namespace_of(obs)
         n_text = "N" if self.local else str(self.n_uav)
