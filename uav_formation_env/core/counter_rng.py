@@ -69,15 +69,15 @@ def philox4x32(counter: Any, key: Any, rounds: int = ROUNDS) -> Any:
     return xp.stack(xp.broadcast_arrays(c0, c1, c2, c3), axis=-1)
 
 
-def _bits(key: Any, words: Any, size: tuple[int, ...]) -> Any:
-    """(rows, *size, 4) Philox bits of counters (element, words[:, 0], words[:, 1], words[:, 2])
-    under each row's key; element e is the flat index within ``size``."""
+def _bits(key: Any, words: Any, count: int) -> Any:
+    """(rows, count, 4) Philox bits of counters (c, words[:, 0], words[:, 1], words[:, 2]) for
+    c = 0 .. count - 1, under each row's key."""
     xp = namespace_of(key)
-    rows, count, pad = key.shape[0], math.prod(size), (1,) * len(size)
-    element = xp.reshape(xp.arange(count, dtype=key.dtype, device=device(key)), (1, *size))
-    per_row = [xp.reshape(words[:, k], (rows, *pad)) for k in range(3)]
+    rows = key.shape[0]
+    element = xp.reshape(xp.arange(count, dtype=key.dtype, device=device(key)), (1, count))
+    per_row = [xp.reshape(words[:, k], (rows, 1)) for k in range(3)]
     counter = xp.stack(xp.broadcast_arrays(element, *per_row), axis=-1)
-    return philox4x32(counter, xp.reshape(key, (rows, *pad, 2)))
+    return philox4x32(counter, xp.reshape(key, (rows, 1, 2)))
 
 
 def _unit(high: Any, low: Any) -> Any:
@@ -87,25 +87,37 @@ def _unit(high: Any, low: Any) -> Any:
     return xp.astype(mantissa, xp.float64) * (1.0 / 9007199254740992.0)  # / 2^53
 
 
+def _pairs(pair: Any, size: tuple[int, ...]) -> Any:
+    """(rows, P, 2) values, two per counter, as (rows, *size): element e is value e % 2 of
+    counter e // 2."""
+    xp = namespace_of(pair)
+    rows, count = pair.shape[0], math.prod(size)
+    flat = xp.reshape(pair, (rows, 2 * pair.shape[1]))[:, :count]
+    return xp.reshape(flat, (rows, *size))
+
+
 def uniform(key: Any, words: Any, size: tuple[int, ...]) -> Any:
-    """U[0, 1) doubles with 53 random bits, one per element.
+    """U[0, 1) doubles with 53 random bits, one per element (two per Philox counter).
 
     Args:
         key: (rows, 2) int64 key words of each row (its stream).
         words: (rows, 3) int64 counter words 1-3 of each row (e.g. draw, UAV, step), in
-            [0, 2^32); word 0 is the element's flat index in ``size``.
-        size: the per-row shape.
+            [0, 2^32); word 0 counts pairs of elements (element e uses counter e // 2).
+        size: the per-row shape (elements in C order).
 
     Returns:
         (rows, *size) float64, in the library and on the device of ``key``; bit-identical on
         numpy and torch.
     """
-    bits = _bits(key, words, size)
-    return _unit(bits[..., 0], bits[..., 1])
+    xp = namespace_of(key)
+    bits = _bits(key, words, (math.prod(size) + 1) // 2)
+    pair = xp.stack((_unit(bits[..., 0], bits[..., 1]), _unit(bits[..., 2], bits[..., 3])), axis=-1)
+    return _pairs(pair, size)
 
 
 def standard_normal(key: Any, words: Any, size: tuple[int, ...]) -> Any:
-    """N(0, 1) doubles, one per element, by the Box-Muller transform of two 53-bit uniforms.
+    """N(0, 1) doubles, one per element, by the Box-Muller transform: the two 53-bit uniforms of
+    a Philox counter give two independent normals (``r cos θ``, ``r sin θ``).
 
     Args: as :func:`uniform`.
 
@@ -113,10 +125,11 @@ def standard_normal(key: Any, words: Any, size: tuple[int, ...]) -> Any:
         (rows, *size) float64 in the library and on the device of ``key``.
     """
     xp = namespace_of(key)
-    bits = _bits(key, words, size)
+    bits = _bits(key, words, (math.prod(size) + 1) // 2)
     u1, u2 = _unit(bits[..., 0], bits[..., 1]), _unit(bits[..., 2], bits[..., 3])
     radius = xp.sqrt(-2.0 * xp.log(1.0 - u1))  # 1 - u1 in (0, 1]: the log is finite
-    return radius * xp.cos((2.0 * math.pi) * u2)
+    angle = (2.0 * math.pi) * u2
+    return _pairs(xp.stack((radius * xp.cos(angle), radius * xp.sin(angle)), axis=-1), size)
 
 
 def key_words(seed: int) -> np.ndarray:
