@@ -63,6 +63,7 @@ __all__ = [
     "subtract_into",
     "take",
     "to_numpy",
+    "torch_compiled",
     "torch_device",
 ]
 
@@ -296,6 +297,15 @@ def backend_device(backend: str, device: Any = None) -> Any:
     except (RuntimeError, TypeError) as error:
         message = f"device must name a torch device such as 'cuda', got {device!r}"
         raise ValueError(message) from error
+
+
+def torch_compiled(function: Any) -> Any:
+    """``torch.compile(function)`` for fixed shapes (compiled lazily, at its first call; the
+    core's one torch import stays in this module)."""
+    namespace_of_backend("torch")  # a clear error if torch is missing
+    import torch
+
+    return torch.compile(function, dynamic=False)
 
 
 def torch_device(device: Any = None) -> Any:

@@ -32,7 +32,7 @@ import numpy as np
 
 from uav_formation_env.config import ObserverConfig
 from uav_formation_env.core import observer_kernel
-from uav_formation_env.core.array_api import copy, device, is_numpy, namespace
+from uav_formation_env.core.array_api import copy, device, is_numpy, namespace, torch_compiled
 
 
 @dataclass
@@ -274,10 +274,8 @@ def compiled_observer_step_held(
     Falls back, with one warning, to the eager loop when compilation is not available (no C++
     compiler, an unsupported platform); the numbers are then the eager ones.
     """
-    import torch
-
     if not _COMPILED_HELD:
-        _COMPILED_HELD.append(torch.compile(_held_arrays, dynamic=False))
+        _COMPILED_HELD.append(torch_compiled(_held_arrays))
     arrays = (state.v_hat, state.s0, state.d_hat, state.e_prev, v0, accel, u_applied)
     try:
         return ObserverState(*_COMPILED_HELD[0](*arrays, dt, config))
