@@ -153,7 +153,7 @@ def run_episodes(
         n_uav: N of a scenario that draws N per reset (None: the scenario's one N).
         backend: the array library of the episode layer, ``"numpy"`` or ``"torch"``
             (:mod:`uav_formation_env.core.array_api`); with torch, a policy whose
-            ``accepts_tensors`` is true (the DMPC metaheuristics on the full layout) gets the
+            ``accepts_tensors`` is true (the DMPC metaheuristics, either layout) gets the
             observations as tensors and acts on the device; any other gets them as numpy
             arrays. The records are numpy arrays either way.
         device: the torch device (None: the CPU); numpy runs on the CPU only.

@@ -65,8 +65,9 @@ Steps 1-4 are a solver of :mod:`uav_formation_env.policies.dmpc_step`: ``Trigger
 Backends: ``act_batch`` takes numpy observations, or torch tensors on any device (the episode
 layer's ``backend="torch"``). With tensors the decoded observations, every UAV's horizon problem,
 the populations and the broadcast plans stay in torch on that device and the actions come back as
-a tensor there; the random numbers are still drawn from the copies' numpy generators on the host
-(the same numbers as on numpy, so a seed flies the same episode to rounding). On torch the
+a tensor there; with ``random="generator"`` the random numbers are still drawn from the copies'
+numpy generators on the host (the same numbers as on numpy, so a seed flies the same episode to
+rounding), with ``random="counter"`` on the device. On torch the
 metaheuristics (PIO, LFPIO, PSO) run, on either observation layout; ``"exact"`` and ``"nash"``
 are numpy-only.
 
