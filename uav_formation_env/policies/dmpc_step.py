@@ -64,7 +64,9 @@ __all__ = [
 ]
 
 
-DRAWS_PER_ROUND = 1024  # counter draw indices reserved per inner round (a solve makes <= 2 + 2 it)
+# counter draw indices reserved per inner round: a solve makes 1 + 2 x iterations draws (61 for
+# LFPIO), so any practical iteration budget fits, and 4,096 rounds fit the 32-bit draw word
+DRAWS_PER_ROUND = 2**20
 
 
 @dataclass(frozen=True)
