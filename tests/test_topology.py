@@ -698,3 +698,59 @@ def test_split_graph_base_keeps_h0_edges_inside_each_group():
     np.testing.assert_array_equal(base.reference_velocity, complete.reference_velocity)
     with pytest.raises(ValueError, match="avoidance.split_graph"):
         dataclasses.replace(ONE, split_graph="sparse")
+
+
+# --- turn preview (avoidance.turn_preview) ------------------------------------------------------
+
+# One obstacle 60 m up the paper route's second leg (+y from the turn at (1000, 0), t = 50 s):
+# along the first leg (ê = +x) it is 60 m to the side, out of range (R_s = 40 m), and at t = 47 s
+# the UAVs (60 m before the turn) are 85 m from its centre, beyond d^o = 70 m. Moved to the turn
+# (+3 s at 20 m/s) they are 60 m before it on the next leg and straddle that leg's centre line.
+PAST_TURN = AvoidanceConfig(obstacles=(ObstacleConfig((1000.0, 60.0), 30.0),))
+BEFORE_TURN = [(940.0, 5.0), (950.0, -5.0), (930.0, 5.0)]  # moved: x = 1000, 1010, 990
+
+
+@pytest.mark.parametrize("preview", [0.0, 2.0, 5.0])
+def test_turn_preview_activates_an_obstacle_past_the_turn_in_the_next_legs_frame(preview):
+    avoidance = dataclasses.replace(PAST_TURN, turn_preview=preview)
+    state, out = step(BEFORE_TURN, t=47.0, avoidance=avoidance)
+    active = preview >= 3.0  # the turn is 3 s away
+    assert out.activated[0, 0] == active and out.avoiding[0].all() == active
+    if not active:  # the paper's rule: nothing until the turn
+        np.testing.assert_array_equal(out.reference_velocity[0], np.tile(PRESET, (3, 1)))
+        return
+    # sides from the next leg's frame (n̂ = -x): UAV 1, moved east of x = 1000, is on side -1;
+    # along the first leg all three are on the same side (y - 60 < 0)
+    np.testing.assert_array_equal(state.side[0, 0], [1, -1, 1])
+    assert state.case[0, 0] == 2
+    np.testing.assert_array_equal(out.groups[0], [0, 1, 0])
+    # each group follows its guide's tangent from where the guide is now; the guide is the
+    # member needing the largest turn (measured from the current heading, as for every group)
+    xy = np.array(BEFORE_TURN) - (1000.0, 60.0)
+    dist = np.hypot(xy[:, 0], xy[:, 1])
+    for slot, sign in ((0, 1.0), (1, -1.0)):
+        members = np.flatnonzero(state.side[0, 0] == sign)
+        lx, ly = tangent_direction(xy[:, 0], xy[:, 1], dist, R_S, sign)
+        demand = [sign * signed_angle(PRESET[:2], np.array([lx[i], ly[i]])) for i in members]
+        guide = members[int(np.argmax(demand))]
+        assert state.guide[0, 0, slot] == guide
+        for i in members:
+            np.testing.assert_allclose(
+                out.reference_velocity[0, i], [20.0 * lx[guide], 20.0 * ly[guide], 0.0], atol=1e-12
+            )
+
+
+def test_turn_preview_changes_nothing_away_from_turns_or_with_an_obstacle_on_the_current_leg():
+    # t = 30 s: the turn is 20 s away (outside the window), the paper's obstacle set-up of ONE
+    preview = dataclasses.replace(ONE, turn_preview=5.0)
+    xy = [(-60.0, 10.0), (-65.0, -20.0), (-75.0, 5.0)]
+    for t in (30.0, 48.0):  # at 48 s within the window, but the obstacle is on the current leg
+        state_a, out_a = step(xy, t=t, avoidance=ONE)
+        state_b, out_b = step(xy, t=t, avoidance=preview)
+        assert out_a.activated.all() and out_b.activated.all()
+        for field in dataclasses.fields(state_a):
+            a, b = getattr(state_a, field.name), getattr(state_b, field.name)
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(out_a.reference_velocity, out_b.reference_velocity)
+    with pytest.raises(ValueError, match="avoidance.turn_preview"):
+        dataclasses.replace(ONE, turn_preview=-1.0)

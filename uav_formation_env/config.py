@@ -281,9 +281,15 @@ class AvoidanceConfig:
     # the graph inside a sub-formation while an obstacle is active: "complete" (the paper) or
     # "base" (H0's own edges inside it: a swarm's in-degree stays small, docs/scenarios.md)
     split_graph: str = "complete"
+    # turn preview: within this long before a turn of the route, an obstacle is also judged
+    # along the next leg from where each UAV will be at the turn (its position plus the preset
+    # velocity until the switch), so an obstacle just past a turn activates before the turn;
+    # 0 is the paper (the current leg only) [s]
+    turn_preview: float = 0.0
 
     def __post_init__(self) -> None:
         _non_negative(self.route_gain, "avoidance.route_gain")
+        _non_negative(self.turn_preview, "avoidance.turn_preview")
         _non_negative(self.route_correction_max, "avoidance.route_correction_max")
         _require(
             self.split_graph in ("complete", "base"),

@@ -16,14 +16,18 @@ turn of the route the formation can come back into its range). One :func:`update
 call runs three phases in this order:
 
 1. **Activation.** An idle obstacle is a candidate when at least one UAV is in range and
-   min_i D_i < d^o (both swarm-wide: the UAV in range need not be the nearest one). At most one
-   obstacle is active per copy: candidates wait while another obstacle is active, and an obstacle
-   restored in this update frees the copy only from the next update on. If several obstacles are
-   candidates at once, the one with the smallest min_i D_i wins (ties: lowest index). With
-   ``avoidance.concurrent`` every candidate activates, whatever else is active (the joint rule of
-   :func:`_avoidance_output`). At
-   activation every UAV gets its side s_i = +1 if λ_lat >= 0 else -1, fixed until the obstacle is
-   done. Case 1 (all sides equal): one group. Case 2: Σ+ and Σ-.
+   min_i D_i < d^o (both swarm-wide: the UAV in range need not be the nearest one). With
+   ``avoidance.turn_preview`` (T_p > 0), within T_p of a turn of the route the same test is also
+   made along the next leg for the UAVs moved to where they will be at the turn (p + v^d times
+   the time left); an obstacle that only that test finds takes its sides from the next leg's
+   frame, and its groups' members are in range while either test holds (:func:`_turn_geometry`).
+   At most one obstacle is active per copy: candidates wait while another obstacle is active,
+   and an obstacle restored in this update frees the copy only from the next update on. If
+   several obstacles are candidates at once, the one with the smallest min_i D_i wins (ties:
+   lowest index). With ``avoidance.concurrent`` every candidate activates, whatever else is
+   active (the joint rule of :func:`_avoidance_output`). At activation every UAV gets its side
+   s_i = +1 if λ_lat >= 0 else -1, fixed until the obstacle is done. Case 1 (all sides equal):
+   one group. Case 2: Σ+ and Σ-.
 2. **Guides and ends.** Group slot 0 holds side +1, slot 1 side -1 (in case 1 the unused slot is
    empty). Every update, a group's guide is its in-range member that needs the largest turn
    towards the group's side to clear the safety circle (the signed angle from ê to the member's
@@ -104,6 +108,7 @@ from uav_formation_env.core.obstacles import (
 )
 from uav_formation_env.core.reference import (
     Schedule,
+    next_leg,
     preset_displacement,
     preset_velocity,
     reference_preview,
@@ -312,7 +317,8 @@ def update_topology(
         centres, r_detect_sq = obstacles.centres, obstacles.r_detect**2
         fast_centres, present = centres[:, None], obstacles.present.T
         r_safe_b, r_detect_b = obstacles.r_safe.T[:, None, :], obstacles.r_detect.T
-    if not (state.status == ACTIVE).any():
+    turn = _turn_geometry(avoidance, schedule, t, positions, preset, centres, r_safe_b)
+    if turn is None and not (state.status == ACTIVE).any():
         # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
         # detection radius, so nothing can activate (activation needs min_i D_i < d^o).
         rel = positions[:, :, None, :2] - fast_centres
@@ -327,6 +333,8 @@ def update_topology(
     e_hat, _ = heading_frame(preset)
     rel_x, rel_y, dist, lon, lat = relative_geometry(positions, centres, e_hat)  # (O, N, B)
     near = in_range(lon, lat, r_safe_b)
+    if turn is not None:  # in range along the next leg, from the positions at the turn
+        near_turn, dist_turn, lat_turn = turn
     slot_sides = constant_like(_SLOT_SIDES, positions)
 
     status = move_batch_last(state.status)  # (O, B), modified in place below
@@ -341,7 +349,13 @@ def update_topology(
     # the nearest candidate wins
     min_dist = amin(dist, axis=1)  # (O, B)
     armed = _armed(status, avoidance.rearm)  # (O, B)
-    candidate = armed & near.any(axis=1) & (min_dist < r_detect_b) & present
+    candidate = near.any(axis=1) & (min_dist < r_detect_b)
+    side_lat = lat
+    if turn is not None:  # met only along the next leg: its sides from that leg's frame
+        by_turn = near_turn.any(axis=1) & (amin(dist_turn, axis=1) < r_detect_b) & ~candidate
+        candidate = candidate | by_turn
+        side_lat = xp.where(by_turn[:, None], lat_turn, lat)
+    candidate = candidate & armed & present
     if avoidance.concurrent:
         activated = candidate
     else:
@@ -350,7 +364,7 @@ def update_topology(
         obs_index = xp.arange(n_obs, device=device(positions))[:, None]
         activated = candidate & (obs_index == chosen)  # (O, B)
     if activated.any():
-        new_side, one_group = choose_sides(lat, avoidance.split_deadband)
+        new_side, one_group = choose_sides(side_lat, avoidance.split_deadband)
         side = xp.where(activated[:, None], new_side, side)
         case = xp.astype(xp.where(activated, xp.where(one_group, 1, 2), case), xp.int8)
         guide = xp.where(activated[:, None], -1, guide)
@@ -363,7 +377,10 @@ def update_topology(
     active = status == ACTIVE  # (O, B)
     if active.any():
         member = side[:, None] == slot_sides[:, None, None]  # (O, 2, N, B)
-        eligible = member & near[:, None]
+        # in range along the current leg or, near a turn, along the next one; every member's
+        # turn is measured from the current heading (one frame: measured from different
+        # headings, the turns of two members are not comparable)
+        eligible = member & (near if turn is None else near | near_turn)[:, None]
         r_safe_d = r_safe if obstacles is None else r_safe_b
         demand = deflection_demand(rel_x, rel_y, dist, r_safe_d, e_hat, slot_sides)  # (O,2,N,B)
         best = _first_argmin(xp.where(eligible, -demand, math.inf), axis=2)  # (O, 2, B)
@@ -403,6 +420,52 @@ def update_topology(
             output, active, side, guide, ended, case, geometry, velocities, preset, avoidance
         )
     return new_state, output
+
+
+def _turn_geometry(
+    avoidance: AvoidanceConfig,
+    schedule: Schedule,
+    t: Any,
+    positions: Any,
+    preset: Any,
+    centres: Any,
+    r_safe: Any,
+) -> tuple[Any, Any, Any] | None:
+    """The range test along the next leg of the route, for copies within
+    ``avoidance.turn_preview`` of a turn; None when off or no copy is that close to one.
+
+    Each UAV is moved to where it will be at the switch had it flown the preset velocity
+    (p + v^d (t_switch - t)), and judged in the next leg's track frame: an obstacle just past a
+    turn is out of range along the current leg until the turn, when the formation, still flying
+    the old leg at 20 m/s, has no room left to avoid it (docs/scenarios.md, turn preview).
+
+    Args:
+        avoidance: ``turn_preview`` [s].
+        schedule: preset velocity, shared or per copy.
+        t: (B,) time [s].
+        positions: (B, N, 3) [m].
+        preset: (B, 3) preset velocity now [m/s].
+        centres: (O, 2) or (B, O, 2) obstacle centres [m].
+        r_safe: R_s broadcastable to (O, N, B) [m].
+
+    Returns:
+        ``(near, dist, lat)``: the in-range flags (O, N, B) (False outside the window), the
+        distances D (O, N, B) [m] and λ_lat (O, N, B) [m] of the moved positions in the next
+        leg's frame.
+    """
+    if avoidance.turn_preview == 0.0:
+        return None
+    xp = namespace_of(positions)
+    v_next, wait = next_leg(schedule, t)  # (B, 3), (B,)
+    turning = ((v_next - preset) ** 2).sum(axis=1) > 1e-12
+    window = turning & (wait > 0.0) & (wait <= avoidance.turn_preview)  # (B,)
+    if not window.any():
+        return None
+    moved = positions + preset[:, None, :] * xp.where(window, wait, 0.0)[:, None, None]
+    e_next, _ = heading_frame(v_next)
+    _, _, dist, lon, lat = relative_geometry(moved, centres, e_next)
+    near = in_range(lon, lat, r_safe) & window
+    return near, dist, lat
 
 
 def _armed(status: Any, rearm: bool) -> Any:
