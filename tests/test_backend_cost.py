@@ -43,7 +43,7 @@ torch = pytest.importorskip("torch")
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 TOL = dict(rtol=1e-12, atol=1e-12)
 PAPER = make_scenario(5)  # the paper's 5 UAVs: leader chain graph, V offsets; s = 30, d_s = 10 m
-NAMES = ("formation", "energy", "terminal", "velocity", "separation")
+NAMES = ("formation", "energy", "terminal", "velocity", "separation", "obstacle")
 
 
 def on(x, device):

@@ -121,7 +121,14 @@ def test_horizon_cost_by_hand() -> None:
         assert got.shape == (1, 3, 1)
         np.testing.assert_allclose(got[0, :, 0], expected, rtol=1e-14, err_msg=name)
     np.testing.assert_allclose(terms.total[0, :, 0], HAND_TOTAL, rtol=1e-14)
-    assert set(terms.as_dict()) == {"formation", "energy", "terminal", "velocity", "separation"}
+    assert set(terms.as_dict()) == {
+        "formation",
+        "energy",
+        "terminal",
+        "velocity",
+        "separation",
+        "obstacle",
+    }
     np.testing.assert_array_equal(terms.separation, 0.0)  # switched off in HAND_WEIGHTS
 
 

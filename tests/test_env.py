@@ -44,7 +44,7 @@ RICH_INFO_TYPES = {
     "penalty": float,
     "t": float,
 }
-COST_TERMS = {"formation", "energy", "terminal", "velocity", "separation"}
+COST_TERMS = {"formation", "energy", "terminal", "velocity", "separation", "obstacle"}
 # numeric infos (the default): cost terms as flat keys, neighbours as an (N,) bool mask
 INFO_TYPES = {
     **{

@@ -348,6 +348,14 @@ class CostConfig:
     docs/deviations.md): ``s Σ_{j≠i} max(0, d_s - ||p_i - p_j||)²`` over every other UAV (sensed,
     not only neighbours), at k = 0..H. It is zero whenever all UAVs are at least d_s apart, e.g. in
     the paper's formation (spacing >= 22.4 m). ``separation = 0`` gives the paper's J_i.
+
+    ``obstacle``, ``obstacle_margin`` and ``obstacle_lookahead`` add another (docs/deviations.md
+    §8): ``o Σ_k max(0, R_o + c_o - D_i(k))²`` over the obstacles, with D_i the horizontal
+    distance of UAV i from an obstacle's centre, R_o its radius and c_o the margin, at k = 0..H
+    and, in the MPC's horizon, also at ``obstacle_lookahead`` points of the free continuation
+    (zero inputs) of the terminal state, δ apart: a UAV heading into an obstacle pays for it
+    before its 1 s horizon reaches the obstacle. It is zero outside every obstacle's clearance
+    circle. ``obstacle = 0`` (the default, and the paper's J_i) switches it off.
     """
 
     q: float = 1.0  # formation error weight, k = 0..H-1 [1/m^2]
@@ -357,14 +365,27 @@ class CostConfig:
     horizon: int = 5  # prediction horizon N (inputs u(0..N-1), terminal state at N) [steps]
     separation: float = 30.0  # s, weight of the separation penalty [1/m^2]
     separation_distance: float = 10.0  # d_s, pairs closer are penalised [m]
+    obstacle: float = 0.0  # o, weight of the obstacle clearance penalty [1/m^2]
+    obstacle_margin: float = 10.0  # c_o, clearance kept from an obstacle's surface [m]
+    # free-flight points after the horizon at which the MPC also evaluates the term [steps]
+    obstacle_lookahead: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("q", "r", "m", "n", "separation", "separation_distance"):
+        for name in (
+            "q", "r", "m", "n", "separation", "separation_distance", "obstacle", "obstacle_margin"
+        ):  # fmt: skip
             _non_negative(getattr(self, name), f"cost.{name}")
         _require(
             isinstance(self.horizon, int) and self.horizon >= 1,
             "cost.horizon",
             f"must be an integer >= 1, got {self.horizon!r}",
+        )
+        _require(
+            isinstance(self.obstacle_lookahead, int)
+            and not isinstance(self.obstacle_lookahead, bool)
+            and self.obstacle_lookahead >= 0,
+            "cost.obstacle_lookahead",
+            f"must be an integer >= 0 (control steps), got {self.obstacle_lookahead!r}",
         )
 
 

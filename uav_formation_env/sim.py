@@ -463,6 +463,7 @@ class FormationSim:
         # one set of pair distances for the separation term, the nearest-UAV distance and the
         # observation: all pairs, or those within the sensing radius (linear in N)
         pair = uav_pairs(self.z[..., :3], cfg.observation.sensing_radius)
+        separation, obstacle_distance = self.distances(pair)
         cost = stage_cost(
             self.z,
             u_n,
@@ -472,8 +473,8 @@ class FormationSim:
             cfg.cost,
             cfg.formation.mirrored_offsets,
             pair_distance=pair,
+            obstacle_surface=obstacle_distance,
         )
-        separation, obstacle_distance = self.distances(pair)
         collision = (separation < cfg.collision.uav_distance) | (obstacle_distance < 0.0)
         estimate = (
             disturbance_estimate(self.observer, cfg.observer)

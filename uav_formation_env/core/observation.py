@@ -231,6 +231,10 @@ class DecodedObservation:
     avoiding: np.ndarray  # (...) bool
     neighbour: np.ndarray  # (..., N-1) bool, h_ij of the k-th other UAV
     relative_formation_error: np.ndarray  # (..., N-1, 6) a_j - a_i [m, m/s]
+    # the nearest obstacle as one slot, the local layout's shape with m = 1
+    obstacle_present: np.ndarray  # (..., 1) bool (False beyond the slots' 1000 m clip)
+    obstacle_relative: np.ndarray  # (..., 1, 2) centre - own position [m]
+    obstacle_radius: np.ndarray  # (..., 1) [m] (distance to the centre minus to the surface)
 
 
 def require_decodable(scenario, policy: str) -> None:
@@ -274,6 +278,12 @@ def decode_observations(obs: np.ndarray, n_uav: int) -> DecodedObservation:
     relative = xp.concat(
         (other[..., 1:4] * FORMATION_SCALE, other[..., 4:7] * VELOCITY_SCALE), axis=-1
     )
+    centre = obs[..., 14:16] * DISTANCE_SCALE
+    surface = obs[..., 16] * DISTANCE_SCALE
+    # a clipped slot (an obstacle 1000 m or more away) holds no usable geometry
+    present = (obs[..., 17] > 0.5) & (xp.abs(obs[..., 16]) < DISTANCE_CLIP)
+    present &= xp.all(xp.abs(obs[..., 14:16]) < DISTANCE_CLIP, axis=-1)
+    radius = xp.sqrt(xp.sum(centre**2, axis=-1)) - surface
     return DecodedObservation(
         velocity=obs[..., 0:3] * VELOCITY_SCALE,
         reference_velocity=obs[..., 6:9] * VELOCITY_SCALE,
@@ -282,4 +292,7 @@ def decode_observations(obs: np.ndarray, n_uav: int) -> DecodedObservation:
         avoiding=obs[..., 13] > 0.5,
         neighbour=other[..., 0] > 0.5,
         relative_formation_error=relative,
+        obstacle_present=present[..., None],
+        obstacle_relative=centre[..., None, :],
+        obstacle_radius=xp.where(present, radius, 0.0)[..., None],
     )

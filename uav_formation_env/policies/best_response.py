@@ -1,10 +1,12 @@
 """Exact best responses: every UAV's horizon problem solved as a box-constrained QP.
 
 The prediction is affine in UAV i's input sequence U_i and J_i is a sum of squares of affine
-functions of it, so apart from the separation term J_i is exactly quadratic in x = U_i flattened
-(n = 3H components, index ``3k + c`` for step k and axis c):
+functions of it, so apart from the clearance terms (separation, obstacle) J_i is exactly quadratic
+in x = U_i flattened (n = 3H components, index ``3k + c`` for step k and axis c):
 
-    J_i(x) = c + gᵀx + xᵀQx + sep(x),   box: lower <= x <= upper.
+    J_i(x) = c + gᵀx + xᵀQx + sep(x),   box: lower <= x <= upper,
+
+with ``sep`` the sum of the clearance terms.
 
 The coefficients are not written down a second time: :meth:`~uav_formation_env.core.cost.
 HorizonCost.quadratic` identifies them from ``1 + 2n + n(n-1)/2`` (136 for H = 5) evaluations of
@@ -12,14 +14,15 @@ the one definition of J_i. ``Q >= r I`` (the energy term), so the quadratic part
 and its minimiser over the box is unique; :func:`solve_box_qp` finds it exactly (to rounding) with
 a batched primal active-set method, which terminates finitely.
 
-The separation term ``sep >= 0`` is not convex. It is zero unless two UAVs can come closer than
-d_s inside the box (:meth:`~uav_formation_env.core.cost.HorizonCost.separation_part` keeps only such
-pairs, none in formation flight). Since ``J_i >= c + gᵀx + xᵀQx`` everywhere, a QP solution with
-``sep = 0`` is the exact global minimiser of J_i over the box. Where ``sep > 0`` at the QP solution
-(rare) :func:`best_response` refines it by a few sequential box-QP steps on the full J_i (model
-Hessian 2Q, gradient of sep by central differences of the one definition, Armijo backtracking):
-that gives a local minimiser, flagged ``exact = False``, with ``lower_bound`` = the QP minimum, a
-certified lower bound of the true minimum.
+The clearance terms ``sep >= 0`` are not convex. They are zero unless two UAVs can come closer than
+d_s, or a UAV within an obstacle's clearance radius, inside the box
+(:meth:`~uav_formation_env.core.cost.HorizonCost.separation_part` and ``obstacle_part`` keep only
+such pairs, none in formation flight away from obstacles). Since ``J_i >= c + gᵀx + xᵀQx``
+everywhere, a QP solution with ``sep = 0`` is the exact global minimiser of J_i over the box. Where
+``sep > 0`` at the QP solution (rare) :func:`best_response` refines it by a few sequential box-QP
+steps on the full J_i (model Hessian 2Q, gradient of sep by central differences of the one
+definition, Armijo backtracking): that gives a local minimiser, flagged ``exact = False``, with
+``lower_bound`` = the QP minimum, a certified lower bound of the true minimum.
 
 Shapes: B copies, N UAVs, H horizon steps, n = 3H, M flattened problems.
 """
@@ -30,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from uav_formation_env.core.cost import QuadraticCost, SeparationCost
+from uav_formation_env.core.cost import QuadraticCost
 from uav_formation_env.policies.broadcast import HorizonProblems
 
 __all__ = [
@@ -44,9 +47,9 @@ __all__ = [
 ]
 
 KKT_TOL = 1e-11  # relative tolerance of the sign test on the multipliers [-]
-REFINE_STEPS = 20  # sequential box-QP steps on the full J_i where the separation term is active
+REFINE_STEPS = 20  # sequential box-QP steps on the full J_i where a clearance term is active
 ARMIJO = 1e-4  # sufficient-decrease constant of the refinement's line search [-]
-FD_STEP = 1e-6  # central-difference step of the separation term's gradient [m/s^2]
+FD_STEP = 1e-6  # central-difference step of the clearance terms' gradient [m/s^2]
 
 
 @dataclass(frozen=True)
@@ -208,11 +211,11 @@ class BestResponse:
         cost: (B, N) J_i(x) by the direct evaluation of the one definition [-].
         lower_bound: (B, N) the minimum of J_i's quadratic part over the box, a lower bound of
             min J_i (equal to it, up to rounding, where ``exact``) [-].
-        exact: (B, N) bool, x is the global minimiser (the separation term vanishes at the QP
+        exact: (B, N) bool, x is the global minimiser (the clearance terms vanish at the QP
             solution and the QP converged); False where the refinement gave a local minimiser.
         qp_iterations: (B, N) active-set iterations of the QP.
         evaluations: (B, N) evaluations of J_i spent: the identification (136 for H = 5), plus
-            the refinement's candidates where the separation term was active.
+            the refinement's candidates where a clearance term was active.
     """
 
     x: np.ndarray
@@ -252,9 +255,9 @@ def best_response(problems: HorizonProblems, x0: np.ndarray | None = None) -> Be
     lower_bound = quad.constant.reshape(-1) + qp.value
     evaluations = np.full(batch * n_uav, identification_evaluations(horizon), dtype=np.int64)
     exact = qp.converged.copy()
-    sep = quad.separation
-    if sep is not None and sep.rows.size:
-        active = sep.rows[_separation_at(sep, x[sep.rows]) > 0.0]
+    if quad.clearance_terms:
+        rows = np.unique(np.concatenate([term.rows for term in quad.clearance_terms]))
+        active = rows[_clearance_at(quad, x[rows], rows) > 0.0]
         if active.size:
             x[active], spent = _refine(quad.take(active), x[active], lower[active], upper[active])
             evaluations[active] += spent
@@ -270,28 +273,29 @@ def best_response(problems: HorizonProblems, x0: np.ndarray | None = None) -> Be
     )
 
 
-def _separation_at(sep: SeparationCost, x: np.ndarray) -> np.ndarray:
-    """Separation term (K,) of the problems ``sep.rows`` at one point each, x (K, n)."""
+def _clearance_at(quad: QuadraticCost, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The clearance terms (K,) of the problems ``rows`` (flat indices) at one point each,
+    x (K, n)."""
     if x.shape[0] == 0:
         return np.zeros(0)
-    grid = np.zeros((sep.shape[0] * sep.shape[1], 1, x.shape[1]))
-    grid[sep.rows, 0] = x
-    candidates = grid.reshape(*sep.shape, 1, -1, 3)
-    return sep.total(candidates).reshape(-1)[sep.rows]
+    grid = np.zeros((quad.constant.size, 1, x.shape[1]))
+    grid[rows, 0] = x
+    candidates = grid.reshape(*quad.constant.shape, 1, -1, 3)
+    return quad.clearance(candidates).reshape(-1)[rows]
 
 
 def _refine(
     quad: QuadraticCost, x: np.ndarray, lower: np.ndarray, upper: np.ndarray
 ) -> tuple[np.ndarray, int]:
-    """Sequential box-QP descent on the full J_i of problems whose separation term is active.
+    """Sequential box-QP descent on the full J_i of problems whose clearance terms are active.
 
     Each step minimises the model ``J(x) + ∇J·d + dᵀQd`` over the box (the quadratic part is
-    exact; the separation term enters through its gradient, by central differences of the one
+    exact; the clearance terms enter through their gradient, by central differences of the one
     definition), then backtracks along the segment (inside the convex box) until Armijo's
     condition holds.
 
     Args:
-        quad: the K problems as one copy (grid (1, K)), with their separation term.
+        quad: the K problems as one copy (grid (1, K)), with their clearance terms.
         x: (K, n) start (the QP solution) inside the box.
         lower, upper: (K, n) the box.
 
@@ -301,8 +305,6 @@ def _refine(
     k, n = x.shape
     hessian = 2.0 * quad.hessian[0]
     linear = quad.linear[0]
-    sep = quad.separation
-    assert sep is not None
     offsets = np.concatenate((FD_STEP * np.eye(n), -FD_STEP * np.eye(n)))
 
     def total(points: np.ndarray) -> np.ndarray:  # (K, P, n) -> (K, P)
@@ -311,9 +313,9 @@ def _refine(
     value = total(x[:, None])[:, 0]
     spent = 1
     for _ in range(REFINE_STEPS):
-        # The quadratic part's gradient is exact from its coefficients; only the separation
-        # term is differenced (it is C1: a squared hinge).
-        probe = sep.total((x[:, None] + offsets).reshape(1, k, 2 * n, -1, 3))[0]
+        # The quadratic part's gradient is exact from its coefficients; only the clearance
+        # terms are differenced (they are C1: squared hinges).
+        probe = quad.clearance((x[:, None] + offsets).reshape(1, k, 2 * n, -1, 3))[0]
         spent += 2 * n
         curvature = np.einsum("kij,kj->ki", hessian, x)
         grad = curvature + linear + (probe[:, :n] - probe[:, n:]) / (2.0 * FD_STEP)

@@ -211,6 +211,8 @@ def horizon_problems(
     their plans; every other UAV is rolled out with zero inputs (its positions enter only the
     separation term). The reference preview is the preset schedule at t + kδ, or the UAV's current
     reference held over the horizon while its observation says "avoiding" (docs/model.md §4.3).
+    The obstacle term (when ``cost.obstacle`` > 0) reads the obstacles in the observation: the
+    nearest one in the full layout, the m nearest in the local one.
 
     Args:
         decoded: observations (B, N, dim), decoded: the full layout, or the local one
@@ -244,6 +246,15 @@ def horizon_problems(
         decoded.avoiding.reshape(-1, 1),
         correction,
     ).reshape(batch, n, horizon + 1, 3)
+    # the obstacles UAV i senses, relative to its own position (the origin of both frames)
+    obstacles = {
+        "obstacle_centre": decoded.obstacle_relative,
+        "obstacle_clearance": namespace_of(decoded.obstacle_radius).where(
+            decoded.obstacle_present,
+            decoded.obstacle_radius + scenario.cost.obstacle_margin,
+            0.0,
+        ),
+    }
     if isinstance(decoded, DecodedLocalObservation):
         if decoded.neighbour_index is None:
             raise ValueError("local observations need their neighbour_index to exchange plans")
@@ -258,6 +269,7 @@ def horizon_problems(
             slots.present,
             scenario.cost,
             dt,
+            **obstacles,
         )
     else:
         offsets = asarray_like(np.asarray(scenario.formation.offsets, dtype=float), plans)
@@ -273,6 +285,7 @@ def horizon_problems(
             scenario.cost,
             dt,
             mirrored,
+            **obstacles,
         )
     xp = namespace_of(decoded.estimate)
     half_width = xp.maximum(scenario.dynamics.u_max - xp.abs(decoded.estimate), 0.0)

@@ -6,13 +6,18 @@ For UAV i over a horizon of H steps, with ``ε_ij(k) = (z_i(k) - z^d_i) - (ẑ_j
     J_i = q Σ_j h_ij Σ_{k<H} ||ε_ij(k)||² + r Σ_{k<H} ||u_i(k)||²
         + m Σ_j h_ij ||ε_ij(H)||² + n Σ_{k<=H} ||v_i(k) - v^d_i(k)||²
         + s Σ_{j≠i} Σ_{k<=H} max(0, d_s - ||p_i(k) - p̂_j(k)||)²
+        + o Σ_obstacles Σ_{k<=H+L} max(0, R + c_o - D_i(k))²
 
-``||x||_w`` is read as ``w xᵀx`` (docs/model.md §4.1). The last line, the separation term, is not
-in the
-paper (docs/deviations.md §5): it runs over every other UAV j (sensed, not only neighbours) and
-vanishes while all UAVs are at least d_s apart. The stage cost, the reward of one realised
-transition, is the ``k``-th summand: ``q Σ_j h_ij ||ε_ij||² + r ||u_i||² + n ||v_i - v^d_i||²
-+ s Σ_{j≠i} max(0, d_s - ||p_i - p_j||)²``. Both are built from the same term functions below.
+``||x||_w`` is read as ``w xᵀx`` (docs/model.md §4.1). The last two lines are not in the paper.
+The separation term (docs/deviations.md §5) runs over every other UAV j (sensed, not only
+neighbours) and vanishes while all UAVs are at least d_s apart. The obstacle term
+(docs/deviations.md §8) runs over the obstacles UAV i senses, with D_i the horizontal distance
+from an obstacle's centre and R its radius, and vanishes outside every clearance circle R + c_o;
+its points k = H+1..H+L are the free continuation ``p_i(H) + (k - H) δ v_i(H)`` of the terminal
+state (L = ``cost.obstacle_lookahead``). ``s = 0`` and ``o = 0`` give the paper's J_i. The stage
+cost, the reward of one realised transition, is the ``k``-th summand: ``q Σ_j h_ij ||ε_ij||² +
+r ||u_i||² + n ||v_i - v^d_i||² + s Σ_{j≠i} max(0, d_s - ||p_i - p_j||)² + o Σ_obstacles
+max(0, R + c_o - D_i)²``. Both are built from the same term functions below.
 
 Shapes: B scenario copies, N UAVs, P candidates per UAV, H horizon steps.
 
@@ -27,12 +32,13 @@ that does not depend on the candidates once, for optimisers that evaluate many p
 from uav_formation_env.core.cost.horizon import (
     HorizonCost,
     horizon_cost,
+    lookahead_times,
     prepare_horizon_cost,
     prepare_slot_horizon_cost,
 )
 from uav_formation_env.core.cost.quadratic import (
+    ClearanceCost,
     QuadraticCost,
-    SeparationCost,
     input_response,
     polarisation_points,
     state_response,
@@ -44,6 +50,8 @@ from uav_formation_env.core.cost.stage import (
     anchored,
     formation_error_sq,
     neighbour_moments,
+    obstacle_active,
+    obstacle_sq,
     others_mask,
     relative_offset_sign,
     separation_active,
@@ -54,16 +62,19 @@ from uav_formation_env.core.cost.stage import (
 )
 
 __all__ = [
+    "ClearanceCost",
     "CostTerms",
     "HorizonCost",
     "NeighbourMoments",
     "QuadraticCost",
-    "SeparationCost",
     "anchored",
     "formation_error_sq",
     "horizon_cost",
     "input_response",
+    "lookahead_times",
     "neighbour_moments",
+    "obstacle_active",
+    "obstacle_sq",
     "others_mask",
     "polarisation_points",
     "prepare_horizon_cost",

@@ -7,11 +7,13 @@ the measured states it was prepared from (numpy, or torch; :mod:`uav_formation_e
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
 from uav_formation_env.config import CostConfig
 from uav_formation_env.core.array_api import (
+    amin,
     as_float,
     asarray_like,
     constant_like,
@@ -20,8 +22,8 @@ from uav_formation_env.core.array_api import (
     namespace_of,
 )
 from uav_formation_env.core.cost.quadratic import (
+    ClearanceCost,
     QuadraticCost,
-    SeparationCost,
     input_response,
     polarisation_points,
     state_response,
@@ -31,6 +33,7 @@ from uav_formation_env.core.cost.stage import (
     NeighbourMoments,
     anchored,
     neighbour_moments,
+    obstacle_active,
     others_mask,
     relative_offset_sign,
     separation_active,
@@ -64,6 +67,11 @@ class HorizonCost:
         others_position: (B, R, S, H+1, 3) each receiver's prediction of every sender's position
             p̂_j(k) (in the receiver's frame) [m]; only the separation term reads it.
         others_mask: (B, R, S) 1 for the senders the separation term counts (every other UAV).
+        obstacle_centre: (B, R, M, 2) the horizontal centres of the M obstacles each receiver
+            senses, relative to its position at time t (the frame's origin) [m]; None: none.
+        obstacle_clearance: (B, R, M) their clearance radii R + c_o, 0 for an absent slot [m].
+        lookahead: (L,) times after the horizon's end at which the obstacle term is also
+            evaluated on the free continuation, jδ for j = 1..L [s].
     """
 
     free: np.ndarray
@@ -74,6 +82,9 @@ class HorizonCost:
     weights: CostConfig
     others_position: np.ndarray
     others_mask: np.ndarray
+    obstacle_centre: np.ndarray | None = None
+    obstacle_clearance: np.ndarray | None = None
+    lookahead: np.ndarray | None = None
 
     def predict(self, candidates: np.ndarray) -> np.ndarray:
         """Predicted states (B, R, P, H+1, 6) of candidates (B, R, P, H, 3), as ``rollout``."""
@@ -83,29 +94,58 @@ class HorizonCost:
 
     def terms(self, candidates: np.ndarray) -> CostTerms:
         """Named terms of J_i for candidates (B, R, P, H, 3) [m/s^2]; each (B, R, P)."""
-        return self._terms(candidates, with_separation=True)
+        return self._terms(candidates, with_clearance=True)
 
-    def _terms(self, candidates: np.ndarray, with_separation: bool) -> CostTerms:
+    def _terms(self, candidates: np.ndarray, with_clearance: bool) -> CostTerms:
         predicted = self.predict(candidates)  # (B, R, P, H+1, 6)
         own = predicted - self.own_offset[:, :, None, None, :]  # anchored, as anchored()
         pair_sq = self.moments.error_sq(own)  # (B, R, P, H+1)
         velocity_sq = velocity_error_sq(predicted[..., 3:], self.reference_preview[:, :, None])
         xp, w = namespace_of(predicted), self.weights
         formation = w.q * pair_sq[..., :-1].sum(axis=-1)
-        if with_separation and separation_active(w):
+        if with_clearance and separation_active(w):
             gap_sq = separation_sq(
                 predicted[..., :3], self.others_position, self.others_mask, w.separation_distance
             )  # (B, R, P, H+1)
             separation = w.separation * gap_sq.sum(axis=-1)
         else:
             separation = xp.zeros_like(formation)
+        if with_clearance and self._has_obstacles:
+            points = self._obstacle_points(predicted)  # (B, R, P, T, 2)
+            diff = points[..., None, :] - self.obstacle_centre[:, :, None, None]  # (.., T, M, 2)
+            distance = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
+            gap = xp.maximum(self.obstacle_clearance[:, :, None, None] - distance, 0.0)
+            obstacle = w.obstacle * einsum_in(xp, "...tm,...tm->...", gap, gap)
+        else:
+            obstacle = xp.zeros_like(formation)
         return CostTerms(
             formation=formation,
             energy=w.r * einsum_in(xp, "...hk,...hk->...", candidates, candidates),
             terminal=w.m * pair_sq[..., -1],
             velocity=w.n * velocity_sq.sum(axis=-1),
             separation=separation,
+            obstacle=obstacle,
         )
+
+    @property
+    def _has_obstacles(self) -> bool:
+        return (
+            obstacle_active(self.weights)
+            and self.obstacle_centre is not None
+            and self.obstacle_centre.shape[2] > 0
+        )
+
+    def _obstacle_points(self, states: np.ndarray) -> np.ndarray:
+        """(..., H+1, 6) states -> (..., T, 2) the horizontal positions the obstacle term reads:
+        k = 0..H, then the free continuation p(H) + jδ v(H), j = 1..L (T = H+1+L). Linear, so it
+        maps unit input responses as it maps trajectories."""
+        xp = namespace_of(states)
+        lookahead = self.lookahead
+        if lookahead is None or lookahead.shape[0] == 0:
+            return states[..., :2]
+        end = states[..., -1:, :]
+        ahead = end[..., :2] + lookahead[:, None] * end[..., 3:5]  # (..., L, 2)
+        return xp.concat((states[..., :2], ahead), axis=-2)
 
     def terms_total(self, candidates: np.ndarray) -> np.ndarray:
         """J_i of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P): ``terms(candidates).total``."""
@@ -122,9 +162,18 @@ class HorizonCost:
             weights=self.weights,
             others_position=take_flat(self.others_position, index),
             others_mask=take_flat(self.others_mask, index),
+            obstacle_centre=(
+                None if self.obstacle_centre is None else take_flat(self.obstacle_centre, index)
+            ),
+            obstacle_clearance=(
+                None
+                if self.obstacle_clearance is None
+                else take_flat(self.obstacle_clearance, index)
+            ),
+            lookahead=self.lookahead,
         )
 
-    def separation_part(self, half_width: np.ndarray | None = None) -> SeparationCost | None:
+    def separation_part(self, half_width: np.ndarray | None = None) -> ClearanceCost | None:
         """The separation term on its own, for population evaluation; None if it is off.
 
         With ``half_width`` (B, R, 3), the per-axis bound ``|u_c(k)| <= half_width_c`` of the
@@ -154,7 +203,7 @@ class HorizonCost:
         keep = xp.broadcast_to(keep, self.others_mask.shape)
         problem, sender = xp.nonzero(keep.reshape(batch * n_recv, -1))
         rows, pair_row = xp.unique_inverse(problem)
-        return SeparationCost(
+        return ClearanceCost(
             shape=(batch, n_recv),
             rows=rows,
             pair_row=pair_row.reshape(-1),
@@ -164,21 +213,64 @@ class HorizonCost:
                 problem, sender
             ],
             weight=w.separation,
-            distance=w.separation_distance,
+            distance=xp.full(
+                problem.shape, w.separation_distance, dtype=free.dtype, device=device(free)
+            ),
+        )
+
+    def obstacle_part(self, half_width: np.ndarray | None = None) -> ClearanceCost | None:
+        """The obstacle term on its own, for population evaluation; None if it is off or no
+        receiver senses an obstacle.
+
+        With ``half_width`` (B, R, 3) only the (receiver, obstacle) pairs that can come within
+        the clearance radius for SOME candidate in the box are kept, by the screen of
+        :meth:`separation_part` over the term's points (the horizon and its free continuation):
+        exact for candidates in the box.
+        """
+        if not self._has_obstacles:
+            return None
+        xp = namespace_of(self.free)
+        batch, n_recv, h1 = self.free.shape[:3]
+        horizon = h1 - 1
+        response = self._obstacle_points(self.response.reshape(3 * horizon, h1, 6))
+        n_points = response.shape[1]
+        response = response.reshape(3 * horizon, n_points * 2)
+        free = self._obstacle_points(self.free)  # (B, R, T, 2)
+        keep = self.obstacle_clearance > 0  # (B, R, M)
+        if half_width is not None:
+            reach = xp.tile(as_float(half_width, self.free), (horizon,)) @ xp.abs(response)
+            reach = xp.sqrt(xp.sum(reach.reshape(batch, n_recv, n_points, 2) ** 2, axis=-1))
+            diff = free[:, :, None] - self.obstacle_centre[:, :, :, None]  # (B, R, M, T, 2)
+            distance = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
+            closest = amin(distance - reach[:, :, None], axis=-1)  # (B, R, M)
+            keep = keep & (closest < self.obstacle_clearance + 1e-6)
+        problem, obstacle = xp.nonzero(keep.reshape(batch * n_recv, -1))
+        rows, pair_row = xp.unique_inverse(problem)
+        centre = self.obstacle_centre.reshape(batch * n_recv, -1, 2)[problem, obstacle]
+        return ClearanceCost(
+            shape=(batch, n_recv),
+            rows=rows,
+            pair_row=pair_row.reshape(-1),
+            free=free.reshape(batch * n_recv, -1)[rows],
+            response=response,
+            others=xp.broadcast_to(centre[:, None], (centre.shape[0], n_points, 2)),
+            weight=self.weights.obstacle,
+            distance=self.obstacle_clearance.reshape(batch * n_recv, -1)[problem, obstacle],
         )
 
     def quadratic(self, half_width: np.ndarray | None = None) -> QuadraticCost:
-        """J_i as its quadratic part plus the separation term, for fast population evaluation.
+        """J_i as its quadratic part plus the clearance terms, for fast population evaluation.
 
-        Without the separation term J_i is exactly quadratic in U (affine prediction, squared
-        norms), so ``J(x) = c + g·x + xᵀ Q x`` with ``x`` = U flattened to n = 3H components. The
+        Without the clearance terms (separation, obstacle) J_i is exactly quadratic in U (affine
+        prediction, squared norms), so ``J(x) = c + g·x + xᵀ Q x`` with ``x`` = U flattened to
+        n = 3H components. The
         coefficients of that part are identified from ``1 + 2n + n(n-1)/2`` evaluations of its
         terms (one call) by polarisation, with no second copy of the formula: ``c = J(0)``,
         ``g_i = (J(e_i) - J(-e_i)) / 2``, ``Q_ii = (J(e_i) + J(-e_i)) / 2 - c``,
         ``Q_ij = (J(e_i + e_j) - J(e_i) - J(e_j) + c) / 2``. Their rounding error is about
-        1e-16 · |J| per unit input squared. The separation term (not quadratic) is evaluated
-        directly, for the pairs :meth:`separation_part` keeps with ``half_width`` (exact for
-        candidates in that box; every pair without it).
+        1e-16 · |J| per unit input squared. The clearance terms (not quadratic) are evaluated
+        directly, for the pairs :meth:`separation_part` and :meth:`obstacle_part` keep with
+        ``half_width`` (exact for candidates in that box; every pair without it).
         """
         xp = namespace_of(self.free)
         batch, n_recv = self.free.shape[:2]
@@ -190,7 +282,7 @@ class HorizonCost:
             xp.broadcast_to(
                 points.reshape(-1, horizon, 3), (batch, n_recv) + (points.shape[0], horizon, 3)
             ),
-            with_separation=False,
+            with_clearance=False,
         ).total
         c = values[..., 0]
         plus, minus, pairs = (
@@ -210,7 +302,17 @@ class HorizonCost:
             linear=0.5 * (plus - minus),
             hessian=hessian,
             separation=self.separation_part(half_width),
+            obstacle=self.obstacle_part(half_width),
         )
+
+
+@lru_cache(maxsize=16)
+def lookahead_times(steps: int, dt: float) -> np.ndarray:
+    """(L,) times jδ, j = 1..L, after the horizon's end at which the obstacle term reads the free
+    continuation [s] (cached and read-only, so that :func:`constant_like` may cache it too)."""
+    times = dt * np.arange(1, steps + 1, dtype=float)
+    times.flags.writeable = False
+    return times
 
 
 def prepare_horizon_cost(
@@ -222,6 +324,8 @@ def prepare_horizon_cost(
     weights: CostConfig,
     dt: float,
     mirrored: bool = False,
+    obstacle_centre: np.ndarray | None = None,
+    obstacle_clearance: np.ndarray | None = None,
 ) -> HorizonCost:
     """The candidate-independent part of :func:`horizon_cost` (same arguments, no candidates).
 
@@ -234,9 +338,12 @@ def prepare_horizon_cost(
         reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
         adjacency: (B, N, N) h_ij, row = receiver.
         offsets: (N, 6) z^d.
-        weights: q, r, m, n, s, d_s.
+        weights: q, r, m, n, s, d_s and the obstacle term's o, c_o, L.
         dt: control step δ [s].
         mirrored: literal mirrored-offset reading.
+        obstacle_centre: (B, R, M, 2) horizontal centres of the obstacles each receiver senses,
+            in the coordinates of ``z0`` [m]; None: no obstacle term.
+        obstacle_clearance: (B, R, M) their clearance radii R + c_o, 0 for an absent one [m].
     """
     xp = namespace_of(z0)
     offsets = asarray_like(offsets, z0)  # e.g. the config's, as numpy
@@ -261,6 +368,8 @@ def prepare_horizon_cost(
         reference_preview,
         weights,
         dt,
+        obstacle_centre,
+        obstacle_clearance,
     )
 
 
@@ -273,6 +382,8 @@ def prepare_slot_horizon_cost(
     present: np.ndarray,
     weights: CostConfig,
     dt: float,
+    obstacle_centre: np.ndarray | None = None,
+    obstacle_clearance: np.ndarray | None = None,
 ) -> HorizonCost:
     """:func:`prepare_horizon_cost` for receivers that see S slots (e.g. their k nearest UAVs)
     in their own frame, where the receiver's own formation offset is 0.
@@ -290,8 +401,11 @@ def prepare_slot_horizon_cost(
         reference_preview: (B, R, H+1, 3) v^d_i(t + kδ) [m/s].
         adjacency: (B, R, S) h_ij of the UAV in each slot (0 for absent slots).
         present: (B, R, S) 1 where the slot holds a UAV (the separation term counts it).
-        weights: q, r, m, n, s, d_s.
+        weights: q, r, m, n, s, d_s and the obstacle term's o, c_o, L.
         dt: control step δ [s].
+        obstacle_centre: (B, R, M, 2) horizontal centres of the obstacles each receiver senses,
+            in the coordinates of ``z0`` [m]; None: no obstacle term.
+        obstacle_clearance: (B, R, M) their clearance radii R + c_o, 0 for an absent one [m].
     """
     return _prepared(
         z0,
@@ -302,6 +416,8 @@ def prepare_slot_horizon_cost(
         reference_preview,
         weights,
         dt,
+        obstacle_centre,
+        obstacle_clearance,
     )
 
 
@@ -314,6 +430,8 @@ def _prepared(
     reference_preview: np.ndarray,
     weights: CostConfig,
     dt: float,
+    obstacle_centre: np.ndarray | None,
+    obstacle_clearance: np.ndarray | None,
 ) -> HorizonCost:
     """The :class:`HorizonCost` of prepared senders' terms: the receivers' free response and the
     unit input responses are computed here, once for both frames."""
@@ -321,6 +439,11 @@ def _prepared(
     free = (z0 @ constant_like(state_response(horizon, dt), z0)).reshape(
         *z0.shape[:-1], horizon + 1, 6
     )
+    if obstacle_centre is not None:
+        if obstacle_clearance is None:
+            raise ValueError("obstacle_centre needs obstacle_clearance, the radii R + c_o")
+        obstacle_centre = asarray_like(obstacle_centre, z0)
+        obstacle_clearance = asarray_like(obstacle_clearance, z0)
     return HorizonCost(
         free=free,
         response=constant_like(input_response(horizon, dt), z0),
@@ -330,6 +453,9 @@ def _prepared(
         weights=weights,
         others_position=others_position,
         others_mask=mask,
+        obstacle_centre=obstacle_centre,
+        obstacle_clearance=obstacle_clearance,
+        lookahead=constant_like(lookahead_times(weights.obstacle_lookahead, dt), z0),
     )
 
 
@@ -343,6 +469,8 @@ def horizon_cost(
     weights: CostConfig,
     dt: float,
     mirrored: bool = False,
+    obstacle_centre: np.ndarray | None = None,
+    obstacle_clearance: np.ndarray | None = None,
 ) -> CostTerms:
     """J_i of every candidate input sequence of every UAV against its neighbours' predictions.
 
@@ -354,13 +482,25 @@ def horizon_cost(
         reference_preview: (B, N, H+1, 3) v^d_i(t + kδ) [m/s].
         adjacency: (B, N, N) h_ij, row = receiver.
         offsets: (N, 6) z^d.
-        weights: q, r, m, n, s, d_s.
+        weights: q, r, m, n, s, d_s and the obstacle term's o, c_o, L.
         dt: control step δ [s].
         mirrored: literal mirrored-offset reading.
+        obstacle_centre: (B, N, M, 2) horizontal centres of the obstacles each UAV senses, in
+            the coordinates of ``z0`` [m]; None: no obstacle term.
+        obstacle_clearance: (B, N, M) their clearance radii R + c_o, 0 for an absent one [m].
 
     Returns:
         :class:`CostTerms` of shape (B, N, P).
     """
     return prepare_horizon_cost(
-        z0, neighbour_trajectories, reference_preview, adjacency, offsets, weights, dt, mirrored
+        z0,
+        neighbour_trajectories,
+        reference_preview,
+        adjacency,
+        offsets,
+        weights,
+        dt,
+        mirrored,
+        obstacle_centre,
+        obstacle_clearance,
     ).terms(candidates)

@@ -1,4 +1,4 @@
-"""Exact quadratic form of J_i in the own inputs, the separation remainder, and the linear
+"""Exact quadratic form of J_i in the own inputs, the clearance remainders, and the linear
 prediction model they are identified with (numpy or torch arrays; the cached unit responses are
 numpy constants, moved to a tensor's device by
 :func:`~uav_formation_env.core.array_api.constant_like`)."""
@@ -22,21 +22,26 @@ from uav_formation_env.core.dynamics import rollout
 
 
 @dataclass(frozen=True)
-class SeparationCost:
-    """The separation term of J_i for the pairs that can be active, for population evaluation.
+class ClearanceCost:
+    """A squared-hinge clearance term of J_i for the pairs that can be active, for population
+    evaluation: ``w Σ_pairs Σ_k max(0, d_pair - ||p_i(k) - q_pair(k)||)²``.
 
-    Built by :meth:`HorizonCost.separation_part`. Problems are the flattened (B·R) receivers;
-    a pair is (problem, sender).
+    Two terms of J_i have this form: the separation term (3-D positions of the receiver and a
+    sender's predicted positions, d = d_s; :meth:`HorizonCost.separation_part`) and the obstacle
+    term (horizontal positions against an obstacle's centre, d = its clearance radius, over the
+    horizon and its free continuation; :meth:`HorizonCost.obstacle_part`). Problems are the
+    flattened (B·R) receivers; a pair is (problem, sender or obstacle).
 
     Attributes:
         shape: (B, R) of the problem grid.
         rows: (K,) problems with at least one kept pair.
         pair_row: (A,) position in ``rows`` of each kept pair's problem.
-        free: (K, (H+1)·3) free-response positions of those problems [m].
-        response: (3H, (H+1)·3) position rows of the unit input responses [m per m/s^2].
-        others: (A, H+1, 3) predicted positions of each pair's sender [m].
-        weight: s [1/m²].
-        distance: d_s [m].
+        free: (K, T·D) free-response positions of those problems at the T points [m].
+        response: (3H, T·D) position rows of the unit input responses [m per m/s^2].
+        others: (A, T, D) each pair's other point (a sender's predicted positions, an
+            obstacle's centre) [m].
+        weight: the term's weight [1/m²].
+        distance: (A,) each pair's clearance d [m].
     """
 
     shape: tuple[int, int]
@@ -46,29 +51,29 @@ class SeparationCost:
     response: np.ndarray
     others: np.ndarray
     weight: float
-    distance: float
+    distance: np.ndarray
 
     def total(self, candidates: np.ndarray) -> np.ndarray:
-        """``s Σ_pairs Σ_k max(0, d_s - ||p_i(k) - p̂_j(k)||)²`` of candidates (B, R, P, H, 3)."""
+        """The term of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P)."""
         xp = namespace_of(candidates)
         batch, n_recv, size = candidates.shape[:3]
         where = {"dtype": candidates.dtype, "device": device(candidates)}
         out = xp.zeros((batch * n_recv, size), **where)
         n_rows = self.rows.shape[0]
         if n_rows:
-            h1 = self.others.shape[1]
+            points, dims = self.others.shape[1:]
             x = candidates.reshape(batch * n_recv, size, -1)[self.rows]  # (K, P, 3H)
-            position = (x @ self.response + self.free[:, None]).reshape(-1, size, h1, 3)
-            diff = position[self.pair_row] - self.others[:, None]  # (A, P, H+1, 3)
+            position = (x @ self.response + self.free[:, None]).reshape(-1, size, points, dims)
+            diff = position[self.pair_row] - self.others[:, None]  # (A, P, T, D)
             distance = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
-            gap = xp.maximum(self.distance - distance, 0.0)
+            gap = xp.maximum(self.distance[:, None, None] - distance, 0.0)
             per_pair = einsum_in(xp, "aph,aph->ap", gap, gap)
             summed = xp.zeros((n_rows, size), **where)
             add_at(summed, self.pair_row, per_pair)
             out[self.rows] = self.weight * summed
         return out.reshape(batch, n_recv, size)
 
-    def take(self, index: np.ndarray) -> SeparationCost:
+    def take(self, index: np.ndarray) -> ClearanceCost:
         """Problems ``index`` (M,) of the flattened (B·R) axis as one copy (grid (1, M)).
 
         ``index`` holds distinct problems (in any order; an integer array of the library of the
@@ -88,7 +93,7 @@ class SeparationCost:
         new_row = new_of_k[self.pair_row]  # the new problem of every pair, -1: dropped
         pairs = xp.nonzero(new_row >= 0)[0]
         pairs = pairs[xp.argsort(new_row[pairs], stable=True)]  # grouped by new problem
-        return SeparationCost(
+        return ClearanceCost(
             shape=(1, index.shape[0]),
             rows=kept_t,
             pair_row=new_row[pairs],
@@ -96,28 +101,49 @@ class SeparationCost:
             response=self.response,
             others=self.others[pairs],
             weight=self.weight,
-            distance=self.distance,
+            distance=self.distance[pairs],
         )
 
 
 @dataclass(frozen=True)
 class QuadraticCost:
-    """``J(x) = c + g·x + xᵀ Q x + separation(x)`` over flattened candidates x (n = 3H).
+    """``J(x) = c + g·x + xᵀ Q x + separation(x) + obstacle(x)`` over flattened candidates x
+    (n = 3H).
 
     Built by :meth:`HorizonCost.quadratic`; evaluates a population with one batched matmul (plus
-    the separation term of the pairs that can be active, if any).
+    the clearance terms of the pairs that can be active, if any).
 
     Attributes:
-        constant: (B, R) c = J(0) without the separation term.
+        constant: (B, R) c = J(0) without the clearance terms.
         linear: (B, R, n) g.
         hessian: (B, R, n, n) Q (symmetric; half the Hessian).
         separation: the separation term, or None if it is off.
+        obstacle: the obstacle term, or None if it is off.
     """
 
     constant: np.ndarray
     linear: np.ndarray
     hessian: np.ndarray
-    separation: SeparationCost | None = None
+    separation: ClearanceCost | None = None
+    obstacle: ClearanceCost | None = None
+
+    @property
+    def clearance_terms(self) -> tuple[ClearanceCost, ...]:
+        """The terms that are not quadratic in x and hold at least one pair."""
+        return tuple(
+            term
+            for term in (self.separation, self.obstacle)
+            if term is not None and term.rows.shape[0]
+        )
+
+    def clearance(self, candidates: np.ndarray) -> np.ndarray:
+        """The clearance terms of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P)."""
+        total = namespace_of(candidates).zeros(
+            candidates.shape[:3], dtype=candidates.dtype, device=device(candidates)
+        )
+        for term in self.clearance_terms:
+            total += term.total(candidates)
+        return total
 
     def total(self, candidates: np.ndarray) -> np.ndarray:
         """J_i of candidates (B, R, P, H, 3) [m/s^2] -> (B, R, P)."""
@@ -129,8 +155,8 @@ class QuadraticCost:
         total = einsum_in(namespace_of(x), "rpk,rpk->rp", y, x)
         total += self.constant.reshape(batch * n_recv, 1)
         total = total.reshape(batch, n_recv, size)
-        if self.separation is not None and self.separation.rows.shape[0]:
-            total += self.separation.total(candidates)
+        for term in self.clearance_terms:
+            total += term.total(candidates)
         return total
 
     def take(self, index: np.ndarray) -> QuadraticCost:
@@ -140,6 +166,7 @@ class QuadraticCost:
             take_flat(self.linear, index),
             take_flat(self.hessian, index),
             None if self.separation is None else self.separation.take(index),
+            None if self.obstacle is None else self.obstacle.take(index),
         )
 
 

@@ -35,10 +35,18 @@ class CostTerms:
     terminal: np.ndarray  # m Σ_j h_ij ||ε_ij(H)||²
     velocity: np.ndarray  # n Σ_k ||v_i(k) - v^d_i(k)||²
     separation: np.ndarray  # s Σ_{j≠i} Σ_k max(0, d_s - ||p_i(k) - p_j(k)||)²
+    obstacle: np.ndarray  # o Σ_obstacles Σ_k max(0, R + c_o - D_i(k))² (horizontal D)
 
     @property
     def total(self) -> np.ndarray:
-        return self.formation + self.energy + self.terminal + self.velocity + self.separation
+        return (
+            self.formation
+            + self.energy
+            + self.terminal
+            + self.velocity
+            + self.separation
+            + self.obstacle
+        )
 
     def as_dict(self) -> dict[str, np.ndarray]:
         return {
@@ -47,6 +55,7 @@ class CostTerms:
             "terminal": self.terminal,
             "velocity": self.velocity,
             "separation": self.separation,
+            "obstacle": self.obstacle,
         }
 
 
@@ -248,6 +257,19 @@ def separation_active(weights: CostConfig) -> bool:
     return weights.separation > 0.0 and weights.separation_distance > 0.0
 
 
+def obstacle_active(weights: CostConfig) -> bool:
+    """Whether the obstacle term can be non-zero (``o > 0``; with a zero margin it still acts
+    inside an obstacle)."""
+    return weights.obstacle > 0.0
+
+
+def obstacle_sq(surface: np.ndarray, margin: float) -> np.ndarray:
+    """``max(0, c_o - surface)²``, the unweighted obstacle penalty of a UAV whose horizontal
+    distance to an obstacle's surface is ``surface`` (D - R, negative inside) [m²]; numpy or
+    torch, any shape (+inf, no obstacle: 0)."""
+    return gap_sq(surface, margin)
+
+
 @lru_cache(maxsize=16)
 def _not_eye(n_uav: int) -> np.ndarray:
     """(N, N) ``1 - I``, cached and read-only."""
@@ -321,6 +343,7 @@ def stage_cost(
     weights: CostConfig,
     mirrored: bool = False,
     pair_distance: np.ndarray | SensedPairs | None = None,
+    obstacle_surface: np.ndarray | None = None,
 ) -> CostTerms:
     """One summand of J_i on realised states (the env reward is minus its total).
 
@@ -341,6 +364,11 @@ def stage_cost(
             :class:`~uav_formation_env.core.proximity.SensedPairs` within a sensing radius >= d_s
             (the same term, linear in N); computed here otherwise (only when the separation term
             is on).
+        obstacle_surface: (B, N) horizontal distance of each UAV to the nearest obstacle's
+            surface [m] (negative inside, +inf without obstacles), in ``z``'s library; needed
+            only when the obstacle term is on. Obstacles' clearance circles never overlap
+            (configuration rule), so at any position at most one obstacle, the nearest, has a
+            non-zero term: the nearest one's term is the sum over all of them.
 
     Returns:
         :class:`CostTerms` of shape (B, N) with ``terminal = 0``, in ``z``'s library and device;
@@ -371,10 +399,17 @@ def stage_cost(
         separation = weights.separation * gap_sq
     else:
         separation = xp.zeros(formation.shape, dtype=formation.dtype, device=device(formation))
+    if obstacle_active(weights):
+        if obstacle_surface is None:
+            raise ValueError("cost.obstacle > 0 needs obstacle_surface, the (B, N) distances")
+        obstacle = weights.obstacle * obstacle_sq(obstacle_surface, weights.obstacle_margin)
+    else:
+        obstacle = xp.zeros(formation.shape, dtype=formation.dtype, device=device(formation))
     return CostTerms(
         formation=formation,
         energy=weights.r * einsum_in(xp, "...k,...k->...", u_n, u_n),
         terminal=xp.zeros(formation.shape, dtype=formation.dtype, device=device(formation)),
         velocity=weights.n * velocity_error_sq(z[..., 3:], reference_velocity),
         separation=separation,
+        obstacle=obstacle,
     )
