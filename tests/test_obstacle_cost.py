@@ -55,8 +55,7 @@ def test_stage_obstacle_term_by_hand() -> None:
     np.testing.assert_array_equal(terms.total, terms.obstacle)
     off = stage_cost(*args, replace(w, obstacle=0.0), obstacle_surface=surface)
     np.testing.assert_array_equal(off.obstacle, 0.0)
-    with pytest.raises(ValueError, match="obstacle_surface"):
-        stage_cost(*args, w)
+    np.testing.assert_array_equal(stage_cost(*args, w).obstacle, 0.0)  # no obstacle given
 
 
 def test_horizon_obstacle_term_by_hand_with_lookahead() -> None:

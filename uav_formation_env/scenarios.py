@@ -32,7 +32,8 @@ All of them but the paper's fly the avoidance rules of :data:`DRAWN_AVOIDANCE` b
 paper's: obstacles activate concurrently, a done obstacle re-arms, between avoidances the
 reference leads the formation back to its preset route, and near a turn an obstacle on the next
 leg activates before the turn (docs/scenarios.md, where each rule's
-effect on the reference policy is measured).
+effect on the reference policy is measured). Their J_i has the obstacle clearance term of
+:data:`DRAWN_COST` (docs/deviations.md §8).
 
 The templates (a :class:`~uav_formation_env.config.SceneConfig` in ``scene``) are concrete
 until drawn: :func:`uav_formation_env.scenes.draw_scene` gives the scenario of one reset.
@@ -228,6 +229,10 @@ DRAWN_AVOIDANCE = {
     "route_correction_max": 5.0,
     "turn_preview": 5.0,
 }
+# J_i's obstacle clearance term (docs/deviations.md §8): 100 / m² within the 10 m safety margin,
+# over the horizon and 2 s of free flight beyond it (10 steps: the 40 m a UAV needs to stop from
+# 20 m/s at 5 m/s^2); on random_fields it took the colliding seeds from 14 to 0 of 100
+DRAWN_COST = {"obstacle": 100.0, "obstacle_lookahead": 10}
 # with concurrent activation only the safety circles must be apart; this much more keeps the
 # fields of random_fields and random_swarm as they were (detection circles apart): 60 m [m]
 DETECTION_APART = 2 * (AvoidanceConfig().detection_margin - AvoidanceConfig().safety_margin)
@@ -241,6 +246,7 @@ def _drawn(name: str, scene: SceneConfig, observation: ObservationConfig | None 
         base,
         name=name,
         avoidance=replace(base.avoidance, **DRAWN_AVOIDANCE),
+        cost=replace(base.cost, **DRAWN_COST),
         scene=scene,
         observation=base.observation if observation is None else observation,
     )
@@ -308,6 +314,7 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
         avoidance=replace(
             base.avoidance, obstacles=obstacles, split_graph="base", **DRAWN_AVOIDANCE
         ),
+        cost=replace(base.cost, **DRAWN_COST),
         # pair terms within 25 m (2.5 spacings, about 20 UAVs of the grid): linear in N
         observation=ObservationConfig(kind="local", sensing_radius=SWARM_SENSING_RADIUS),
     )

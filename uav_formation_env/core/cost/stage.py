@@ -365,10 +365,11 @@ def stage_cost(
             (the same term, linear in N); computed here otherwise (only when the separation term
             is on).
         obstacle_surface: (B, N) horizontal distance of each UAV to the nearest obstacle's
-            surface [m] (negative inside, +inf without obstacles), in ``z``'s library; needed
-            only when the obstacle term is on. Obstacles' clearance circles never overlap
-            (configuration rule), so at any position at most one obstacle, the nearest, has a
-            non-zero term: the nearest one's term is the sum over all of them.
+            surface [m] (negative inside, +inf without obstacles), in ``z``'s library; None: no
+            obstacle (the term is 0, as it is with ``cost.obstacle = 0``). Safety circles
+            never overlap (configuration rule), so with ``obstacle_margin`` at most the safety
+            margin at most one obstacle, the nearest, has a non-zero term at any position: the
+            nearest one's term is the sum over all of them.
 
     Returns:
         :class:`CostTerms` of shape (B, N) with ``terminal = 0``, in ``z``'s library and device;
@@ -399,9 +400,7 @@ def stage_cost(
         separation = weights.separation * gap_sq
     else:
         separation = xp.zeros(formation.shape, dtype=formation.dtype, device=device(formation))
-    if obstacle_active(weights):
-        if obstacle_surface is None:
-            raise ValueError("cost.obstacle > 0 needs obstacle_surface, the (B, N) distances")
+    if obstacle_active(weights) and obstacle_surface is not None:
         obstacle = weights.obstacle * obstacle_sq(obstacle_surface, weights.obstacle_margin)
     else:
         obstacle = xp.zeros(formation.shape, dtype=formation.dtype, device=device(formation))
