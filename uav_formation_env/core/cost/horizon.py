@@ -188,34 +188,19 @@ class HorizonCost:
         if not separation_active(w):
             return None
         xp = namespace_of(self.free)
-        batch, n_recv, h1 = self.free.shape[:3]
-        horizon = h1 - 1
-        response = self.response.reshape(3 * horizon, h1, 6)[:, :, :3].reshape(3 * horizon, -1)
-        free = self.free[..., :3]  # (B, R, H+1, 3)
-        keep = self.others_mask > 0
-        if half_width is not None:
-            reach = xp.tile(as_float(half_width, self.free), (horizon,)) @ xp.abs(response)
-            reach = xp.sqrt(xp.sum(reach.reshape(batch, n_recv, h1, 3) ** 2, axis=-1))
-            diff = free[:, :, None] - self.others_position  # (B, R, S, H+1, 3)
-            pair = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
-            closest = pair - reach[:, :, None]
-            keep = keep & (xp.min(closest, axis=-1) < w.separation_distance + 1e-6)
-        keep = xp.broadcast_to(keep, self.others_mask.shape)
-        problem, sender = xp.nonzero(keep.reshape(batch * n_recv, -1))
-        rows, pair_row = xp.unique_inverse(problem)
-        return ClearanceCost(
-            shape=(batch, n_recv),
-            rows=rows,
-            pair_row=pair_row.reshape(-1),
-            free=free.reshape(batch * n_recv, -1)[rows],
-            response=response,
-            others=self.others_position.reshape(batch * n_recv, *self.others_position.shape[2:])[
-                problem, sender
-            ],
-            weight=w.separation,
-            distance=xp.full(
-                problem.shape, w.separation_distance, dtype=free.dtype, device=device(free)
-            ),
+        h1 = self.free.shape[2]
+        limit = xp.full(
+            self.others_mask.shape, w.separation_distance, dtype=self.free.dtype,
+            device=device(self.free),
+        )  # fmt: skip
+        return _screened_clearance(
+            self.free[..., :3],
+            self.response.reshape(-1, h1, 6)[:, :, :3],
+            self.others_position,
+            self.others_mask > 0,
+            limit,
+            w.separation,
+            half_width,
         )
 
     def obstacle_part(self, half_width: np.ndarray | None = None) -> ClearanceCost | None:
@@ -229,33 +214,15 @@ class HorizonCost:
         """
         if not self._has_obstacles:
             return None
-        xp = namespace_of(self.free)
-        batch, n_recv, h1 = self.free.shape[:3]
-        horizon = h1 - 1
-        response = self._obstacle_points(self.response.reshape(3 * horizon, h1, 6))
-        n_points = response.shape[1]
-        response = response.reshape(3 * horizon, n_points * 2)
-        free = self._obstacle_points(self.free)  # (B, R, T, 2)
-        keep = self.obstacle_clearance > 0  # (B, R, M)
-        if half_width is not None:
-            reach = xp.tile(as_float(half_width, self.free), (horizon,)) @ xp.abs(response)
-            reach = xp.sqrt(xp.sum(reach.reshape(batch, n_recv, n_points, 2) ** 2, axis=-1))
-            diff = free[:, :, None] - self.obstacle_centre[:, :, :, None]  # (B, R, M, T, 2)
-            distance = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
-            closest = amin(distance - reach[:, :, None], axis=-1)  # (B, R, M)
-            keep = keep & (closest < self.obstacle_clearance + 1e-6)
-        problem, obstacle = xp.nonzero(keep.reshape(batch * n_recv, -1))
-        rows, pair_row = xp.unique_inverse(problem)
-        centre = self.obstacle_centre.reshape(batch * n_recv, -1, 2)[problem, obstacle]
-        return ClearanceCost(
-            shape=(batch, n_recv),
-            rows=rows,
-            pair_row=pair_row.reshape(-1),
-            free=free.reshape(batch * n_recv, -1)[rows],
-            response=response,
-            others=xp.broadcast_to(centre[:, None], (centre.shape[0], n_points, 2)),
-            weight=self.weights.obstacle,
-            distance=self.obstacle_clearance.reshape(batch * n_recv, -1)[problem, obstacle],
+        h1 = self.free.shape[2]
+        return _screened_clearance(
+            self._obstacle_points(self.free),
+            self._obstacle_points(self.response.reshape(-1, h1, 6)),
+            self.obstacle_centre[:, :, :, None],
+            self.obstacle_clearance > 0,
+            self.obstacle_clearance,
+            self.weights.obstacle,
+            half_width,
         )
 
     def quadratic(self, half_width: np.ndarray | None = None) -> QuadraticCost:
@@ -304,6 +271,55 @@ class HorizonCost:
             separation=self.separation_part(half_width),
             obstacle=self.obstacle_part(half_width),
         )
+
+
+def _screened_clearance(
+    free: np.ndarray,
+    response: np.ndarray,
+    others: np.ndarray,
+    keep: np.ndarray,
+    limit: np.ndarray,
+    weight: float,
+    half_width: np.ndarray | None,
+) -> ClearanceCost:
+    """A clearance term's (receiver, other) pairs as a :class:`ClearanceCost`, screened by the
+    box (:meth:`HorizonCost.separation_part`).
+
+    Args:
+        free: (B, R, T, D) the receivers' free-response points [m].
+        response: (3H, T, D) the points' unit input responses [m per m/s^2].
+        others: (B, R, S, T, D), or (B, R, S, 1, D) for fixed points, each pair's other point.
+        keep: (B, R, S) bool, the pairs that count.
+        limit: (B, R, S) each pair's clearance [m].
+        weight: the term's weight.
+        half_width: (B, R, 3) the box ``|u_c(k)| <= half_width_c``, or None (keep every pair).
+    """
+    xp = namespace_of(free)
+    batch, n_recv, n_points, dims = free.shape
+    horizon = response.shape[0] // 3
+    response = response.reshape(3 * horizon, n_points * dims)
+    if half_width is not None:
+        reach = xp.tile(as_float(half_width, free), (horizon,)) @ xp.abs(response)
+        reach = xp.sqrt(xp.sum(reach.reshape(batch, n_recv, n_points, dims) ** 2, axis=-1))
+        diff = free[:, :, None] - others  # (B, R, S, T, D)
+        distance = xp.sqrt(einsum_in(xp, "...k,...k->...", diff, diff))
+        closest = amin(distance - reach[:, :, None], axis=-1)  # (B, R, S)
+        keep = keep & (closest < limit + 1e-6)
+    keep = xp.broadcast_to(keep, limit.shape)
+    problem, other = xp.nonzero(keep.reshape(batch * n_recv, -1))
+    rows, pair_row = xp.unique_inverse(problem)
+    n_other = limit.shape[2]
+    paired = xp.broadcast_to(others, (batch, n_recv, n_other, n_points, dims))
+    return ClearanceCost(
+        shape=(batch, n_recv),
+        rows=rows,
+        pair_row=pair_row.reshape(-1),
+        free=free.reshape(batch * n_recv, -1)[rows],
+        response=response,
+        others=paired.reshape(batch * n_recv, n_other, n_points, dims)[problem, other],
+        weight=weight,
+        distance=limit.reshape(batch * n_recv, -1)[problem, other],
+    )
 
 
 @lru_cache(maxsize=16)
