@@ -275,7 +275,7 @@ def test_dmpc_with_the_obstacle_term_on_torch_equals_numpy(device: str, kind: st
         policy.reset(2, seeds=[3, 8])
         step = episodes.reset(seed=[3, 8])
         actions = []
-        for _ in range(20):
+        for _ in range(10):
             action = policy.act_batch(step.observation, step.neighbour_index)
             step = episodes.step(action)
             actions.append(to_numpy(action).copy())
