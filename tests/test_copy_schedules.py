@@ -13,6 +13,7 @@ from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.core.local_observation import decode_local_observations
 from uav_formation_env.core.observation import require_decodable
 from uav_formation_env.core.reference import (
+    blend_offset,
     copy_schedules,
     next_leg,
     preset_displacement,
@@ -84,12 +85,16 @@ def test_each_copy_flies_its_own_drawn_route_and_a_seed_names_it():
     assert len(headings) == 2
 
 
-@pytest.mark.parametrize("route_gain", [0.0, 0.1])
-def test_the_policy_preview_from_the_local_observation_is_the_simulator_preview(route_gain):
-    scenario = with_overrides(ROUTES, {"avoidance.route_gain": route_gain})
+@pytest.mark.parametrize(("route_gain", "turn_blend"), [(0.0, 0.0), (0.1, 0.0), (0.05, 4.0)])
+def test_the_policy_preview_from_the_local_observation_is_the_simulator_preview(
+    route_gain, turn_blend
+):
+    scenario = with_overrides(
+        ROUTES, {"avoidance.route_gain": route_gain, "avoidance.turn_blend": turn_blend}
+    )
     episodes = FormationEpisodes(scenario, 4)
     step = episodes.reset(seed=[1, 2, 3, 4])
-    sim, config, switches, corrected = episodes.sim, ROUTES.observation, 0, 0
+    sim, config, switches, corrected, blended = episodes.sim, ROUTES.observation, 0, 0, 0
     for _ in range(250):  # 50 s: every copy passes at least one turn
         decoded = decode_local_observations(
             step.observation, config.neighbours, config.obstacles, config.nearest
@@ -106,12 +111,15 @@ def test_the_policy_preview_from_the_local_observation_is_the_simulator_preview(
         theirs = sim.reference_preview()
         np.testing.assert_allclose(ours, theirs, atol=1e-5)  # float32 slots
         corrected += int((np.abs(step.result.route_correction) > 0.1).any())
+        offset = blend_offset(sim.schedule, sim.t, turn_blend)
+        blended += int((np.abs(offset) > 0.1).any())
         switches += int((np.abs(np.diff(theirs, axis=2)).max(axis=-1) > 1).sum())
         last = step.result
         u = consensus_pd(sim.z, last.reference_velocity, last.adjacency, sim.offsets, 5.0)
         step = episodes.step(u)
     assert switches > 0  # the previews did cross turns
     assert (corrected > 0) == (route_gain > 0)  # and held a route-return term
+    assert (blended > 0) == (turn_blend > 0)  # and a blended corner
 
 
 def test_mission_route_error_is_measured_against_each_copys_own_route():

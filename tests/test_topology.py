@@ -18,6 +18,7 @@ from uav_formation_env.config import AvoidanceConfig, ObstacleConfig, ScheduleCo
 from uav_formation_env.core.obstacles import (
     heading_frame,
     in_range,
+    obstacle_arrays,
     relative_geometry,
     tangent_direction,
 )
@@ -26,6 +27,7 @@ from uav_formation_env.core.topology import (
     DONE,
     IDLE,
     TopologyState,
+    _turn_geometry,
     init_topology,
     obstacle_distances,
     preset_velocity,
@@ -708,10 +710,15 @@ def test_split_graph_base_keeps_h0_edges_inside_each_group():
 # (+3 s at 20 m/s) they are 60 m before it on the next leg and straddle that leg's centre line.
 PAST_TURN = AvoidanceConfig(obstacles=(ObstacleConfig((1000.0, 60.0), 30.0),))
 BEFORE_TURN = [(940.0, 5.0), (950.0, -5.0), (930.0, 5.0)]  # moved: x = 1000, 1010, 990
+# Each UAV's chord runs from p to c = m + ê' (max(-λ'_lon, 0) + R_s) = (x_m, 100); by hand,
+# λ^c = (p - o)·n̂_c: UAV 0: chord (60, 95), p - o = (-60, -55): 2400 / 112.36 = 21.3597 m;
+# UAV 1: chord (60, 105), p - o = (-50, -65): 11.1631 m; UAV 2: chord (60, 95),
+# p - o = (-70, -55): 29.8146 m. In the next leg's frame UAV 1 (x = 1010) is east of the centre.
+PAST_TURN_CHORD_LAT = [21.359719655519267, 11.16312611302876, 29.814608685828976]
 
 
 @pytest.mark.parametrize("preview", [0.0, 2.0, 5.0])
-def test_turn_preview_activates_an_obstacle_past_the_turn_in_the_next_legs_frame(preview):
+def test_turn_preview_activates_an_obstacle_past_the_turn_and_passes_it_inside_the_bend(preview):
     avoidance = dataclasses.replace(PAST_TURN, turn_preview=preview)
     state, out = step(BEFORE_TURN, t=47.0, avoidance=avoidance)
     active = preview >= 3.0  # the turn is 3 s away
@@ -719,38 +726,96 @@ def test_turn_preview_activates_an_obstacle_past_the_turn_in_the_next_legs_frame
     if not active:  # the paper's rule: nothing until the turn
         np.testing.assert_array_equal(out.reference_velocity[0], np.tile(PRESET, (3, 1)))
         return
-    # sides from the next leg's frame (n̂ = -x): UAV 1, moved east of x = 1000, is on side -1;
-    # along the first leg all three are on the same side (y - 60 < 0)
-    np.testing.assert_array_equal(state.side[0, 0], [1, -1, 1])
-    assert state.case[0, 0] == 2
-    np.testing.assert_array_equal(out.groups[0], [0, 1, 0])
-    # each group follows its guide's tangent from where the guide is now; the guide is the
-    # member needing the largest turn (measured from the current heading, as for every group)
+    # sides from the chords: all three have the obstacle on their right (λ^c > 0), so the
+    # formation passes in one group on the inside of the left turn; the next leg's frame alone
+    # split UAV 1 off round the outside (side -1, case 2)
+    np.testing.assert_array_equal(state.side[0, 0], [1, 1, 1])
+    assert state.case[0, 0] == 1
+    np.testing.assert_array_equal(out.groups[0], [0, 0, 0])
+    # the group follows its guide's tangent from where the guide is now; the guide is the member
+    # needing the largest turn (measured from the current heading, as for every group)
     xy = np.array(BEFORE_TURN) - (1000.0, 60.0)
     dist = np.hypot(xy[:, 0], xy[:, 1])
-    for slot, sign in ((0, 1.0), (1, -1.0)):
-        members = np.flatnonzero(state.side[0, 0] == sign)
-        lx, ly = tangent_direction(xy[:, 0], xy[:, 1], dist, R_S, sign)
-        demand = [sign * signed_angle(PRESET[:2], np.array([lx[i], ly[i]])) for i in members]
-        guide = members[int(np.argmax(demand))]
-        assert state.guide[0, 0, slot] == guide
-        for i in members:
-            np.testing.assert_allclose(
-                out.reference_velocity[0, i], [20.0 * lx[guide], 20.0 * ly[guide], 0.0], atol=1e-12
-            )
+    lx, ly = tangent_direction(xy[:, 0], xy[:, 1], dist, R_S, 1.0)
+    demand = [signed_angle(PRESET[:2], np.array([lx[i], ly[i]])) for i in range(3)]
+    guide = int(np.argmax(demand))
+    assert state.guide[0, 0, 0] == guide and state.guide[0, 0, 1] == -1
+    for i in range(3):
+        np.testing.assert_allclose(
+            out.reference_velocity[0, i], [20.0 * lx[guide], 20.0 * ly[guide], 0.0], atol=1e-12
+        )
 
 
-def test_turn_preview_changes_nothing_away_from_turns_or_with_an_obstacle_on_the_current_leg():
-    # t = 30 s: the turn is 20 s away (outside the window), the paper's obstacle set-up of ONE
+def test_turn_geometry_chord_lateral_coordinates_by_hand():
+    avoidance = dataclasses.replace(PAST_TURN, turn_preview=5.0)
+    positions = np.concatenate([np.array(BEFORE_TURN), np.zeros((3, 1))], axis=1)[None]
+    t = np.array([47.0])
+    centres, r_safe, _ = obstacle_arrays(avoidance)
+    preset = preset_velocity(SCHEDULE, t)
+    near, dist, chord_lat, window = _turn_geometry(
+        avoidance, SCHEDULE, t, positions, preset, centres, r_safe[:, None, None]
+    )
+    assert window.tolist() == [True]
+    np.testing.assert_allclose(chord_lat[0, :, 0], PAST_TURN_CHORD_LAT, rtol=1e-12)
+    # the moved positions (1000, 5), (1010, -5), (990, 5): 55, 65, 55 m before the centre on the
+    # next leg, 0, 10 and 10 m beside it
+    np.testing.assert_allclose(dist[0, :, 0], [55.0, np.hypot(10.0, 65.0), np.hypot(10.0, 55.0)])
+    assert near[0, :, 0].all()
+    # outside the window (t = 40 s: the turn is 10 s away) there is no turn geometry
+    assert (
+        _turn_geometry(
+            avoidance, SCHEDULE, np.array([40.0]), positions, preset, centres, r_safe[:, None, None]
+        )
+        is None
+    )
+
+
+def test_turn_geometry_an_obstacle_passed_before_the_turn_keeps_the_current_legs_frame():
+    # O at (950, 0), R_s = 30 m: moved to the turn, (1000, y), the UAVs are 50 m past its centre
+    # along the current leg, beyond R_s, so their chords run along ê = +x and λ^c = λ_lat = y
+    # (the chord to the next leg would give λ^c = -4.1, 0.0 and 11.6 m)
+    avoidance = AvoidanceConfig(obstacles=(ObstacleConfig((950.0, 0.0), 20.0),), turn_preview=5.0)
+    ys = np.array([-12.0, -6.0, 8.0])
+    positions = np.stack([np.full(3, 940.0), ys, np.zeros(3)], axis=1)[None]
+    t = np.array([47.0])
+    centres, r_safe, _ = obstacle_arrays(avoidance)
+    preset = preset_velocity(SCHEDULE, t)
+    *_, chord_lat, window = _turn_geometry(
+        avoidance, SCHEDULE, t, positions, preset, centres, r_safe[:, None, None]
+    )
+    assert window.tolist() == [True]
+    np.testing.assert_array_equal(chord_lat[0, :, 0], ys)
+
+
+# An obstacle in the corner of the same turn, 30 m past the turn point on the first leg's line
+# (R_s = 30 m, d^o = 60 m), met along the current leg 1.4 s before the turn by UAVs abreast at
+# y = -12, -6 and 8. The sign of λ_lat splits them (case 2: two UAVs round the outside of the
+# bend, south of the obstacle); their chords to (1000, 30), (1000, 30) and (1000, 38) have
+# λ^c = 41.60, 42.10 and 47.86 m by hand, so near the turn all pass on the inside.
+CORNER = AvoidanceConfig(obstacles=(ObstacleConfig((1030.0, 0.0), 20.0),))
+AT_CORNER = [(972.0, -12.0), (972.0, -6.0), (972.0, 8.0)]
+
+
+def test_turn_preview_passes_a_corner_obstacle_on_the_inside_of_the_bend():
+    state, out = step(AT_CORNER, t=48.6, avoidance=CORNER)  # the paper's rule
+    assert out.activated[0, 0] and state.case[0, 0] == 2
+    np.testing.assert_array_equal(state.side[0, 0], [-1, -1, 1])
+    state, out = step(AT_CORNER, t=48.6, avoidance=dataclasses.replace(CORNER, turn_preview=5.0))
+    assert out.activated[0, 0] and state.case[0, 0] == 1
+    np.testing.assert_array_equal(state.side[0, 0], [1, 1, 1])
+    assert (out.reference_velocity[0, :, 1] > 0.0).all()  # turning north, into the bend
+
+
+def test_turn_preview_changes_nothing_away_from_turns():
+    # t = 30 s: the turn is 20 s away (outside the window), the paper's obstacle set-up of ONE;
+    # within the window the sides of any obstacle come from the chords (tests above)
     preview = dataclasses.replace(ONE, turn_preview=5.0)
     xy = [(-60.0, 10.0), (-65.0, -20.0), (-75.0, 5.0)]
-    for t in (30.0, 48.0):  # at 48 s within the window, but the obstacle is on the current leg
-        state_a, out_a = step(xy, t=t, avoidance=ONE)
-        state_b, out_b = step(xy, t=t, avoidance=preview)
-        assert out_a.activated.all() and out_b.activated.all()
-        for field in dataclasses.fields(state_a):
-            a, b = getattr(state_a, field.name), getattr(state_b, field.name)
-            np.testing.assert_array_equal(a, b)
-        np.testing.assert_array_equal(out_a.reference_velocity, out_b.reference_velocity)
+    state_a, out_a = step(xy, t=30.0, avoidance=ONE)
+    state_b, out_b = step(xy, t=30.0, avoidance=preview)
+    assert out_a.activated.all() and out_b.activated.all()
+    for field in dataclasses.fields(state_a):
+        np.testing.assert_array_equal(getattr(state_a, field.name), getattr(state_b, field.name))
+    np.testing.assert_array_equal(out_a.reference_velocity, out_b.reference_velocity)
     with pytest.raises(ValueError, match="avoidance.turn_preview"):
         dataclasses.replace(ONE, turn_preview=-1.0)

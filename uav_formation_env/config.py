@@ -286,10 +286,16 @@ class AvoidanceConfig:
     # velocity until the switch), so an obstacle just past a turn activates before the turn;
     # 0 is the paper (the current leg only) [s]
     turn_preview: float = 0.0
+    # corner blend: outside an avoidance the reference is the preset velocity averaged over a
+    # window this long centred on now, so that a turn of the route ramps over the window instead
+    # of switching at once (core/reference.py: blended_velocity); the route point is the same
+    # once the window has passed; 0 is the paper (the preset velocity of eq. 23) [s]
+    turn_blend: float = 0.0
 
     def __post_init__(self) -> None:
         _non_negative(self.route_gain, "avoidance.route_gain")
         _non_negative(self.turn_preview, "avoidance.turn_preview")
+        _non_negative(self.turn_blend, "avoidance.turn_blend")
         _non_negative(self.route_correction_max, "avoidance.route_correction_max")
         _require(
             self.split_graph in ("complete", "base"),

@@ -60,7 +60,7 @@ from uav_formation_env.core.observation import (
     VELOCITY_SCALE,
     build_observations,
 )
-from uav_formation_env.core.reference import next_leg, route_error
+from uav_formation_env.core.reference import blend_offset, next_leg, route_error
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.sim import FormationSim, SeedLike, StepResult
 
@@ -172,8 +172,12 @@ def encode_observations(
             m=config.obstacles,
             nearest=config.nearest,
             mirrored=scenario.formation.mirrored_offsets,
-            # the next leg's reference as it would be now (with the route-return term)
-            next_velocity=next_velocity + result.route_correction,
+            # the next leg's reference as it would be now (with the route-return term and the
+            # corner blend's offset: a policy previews "this reference until the switch, then
+            # that one", as the simulator does)
+            next_velocity=next_velocity
+            + result.route_correction
+            + blend_offset(sim.schedule, result.t, scenario.avoidance.turn_blend),
             time_to_switch=wait,
             distance=sim.pair_distances_of(result),
             sensing_radius=config.sensing_radius,

@@ -57,7 +57,7 @@ from uav_formation_env.core.observer import (
 )
 from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
 from uav_formation_env.core.proximity import SensedPairs, nearest_distance, uav_pairs
-from uav_formation_env.core.reference import CopySchedules, Schedule, copy_schedules
+from uav_formation_env.core.reference import CopySchedules, Schedule, blend_offset, copy_schedules
 from uav_formation_env.scenes import max_gust_std, max_obstacles, n_uav_range, scene_of_seed
 from uav_formation_env.seeding import check_seed
 
@@ -622,8 +622,13 @@ class FormationSim:
         return uav_pairs(result.z[..., :3], self.scenario.observation.sensing_radius)
 
     def reference_preview(self) -> np.ndarray:
-        """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held)."""
+        """v^d over the MPC horizon, (B, N, H+1, 3) [m/s] (avoidance references held).
+
+        The route return and the corner blend of now are held over the horizon on top of the
+        schedule, as a policy sees them in its observation (the blend's ramp is not previewed).
+        """
         assert self.last is not None, "call reset() first"
+        blend = blend_offset(self.schedule, self.t, self.scenario.avoidance.turn_blend)
         return topology.reference_preview(
             self.schedule,
             self.t,
@@ -631,7 +636,7 @@ class FormationSim:
             self.scenario.cost.horizon,
             self.last.reference_velocity,
             self.last.avoiding,
-            self.last.route_correction,
+            self.last.route_correction + blend,
         )
 
     @property

@@ -37,6 +37,8 @@ from uav_formation_env.core.array_api import (
 __all__ = [
     "CopySchedules",
     "Schedule",
+    "blend_offset",
+    "blended_velocity",
     "config_cache",
     "copy_schedules",
     "next_leg",
@@ -267,6 +269,59 @@ def preset_displacement(schedule: Schedule, t: np.ndarray) -> np.ndarray:
     if velocities.ndim == 2:
         return covered @ velocities
     return (covered[..., None] * velocities).sum(axis=-2)
+
+
+def blended_velocity(schedule: Schedule, t: Any, blend: float) -> Any:
+    """The preset velocity averaged over a window of ``blend`` seconds centred on t.
+
+    ``v_b(t) = (D(t + h) - D(t - h)) / (2h)``, h = blend / 2, with D the preset displacement
+    (:func:`preset_displacement`, extended before t = 0 by the first leg's velocity). Far from a
+    switch (more than h away) it is the preset velocity; across a switch it ramps linearly from
+    one leg's velocity to the next over ``[t_s - h, t_s + h]``, so the turn starts h early and
+    ends h late and the distance flown is the same: the route point is reached again at
+    ``t_s + h``. A switch of eq. 23 asks for an infinite acceleration; a 90-degree turn at
+    20 m/s with 5 m/s^2 per axis takes 4 s, and a formation tracking the sharp switch overshoots
+    the corner by 30-60 m (docs/scenarios.md, "Corners of the route"). ``blend = 0`` is
+    :func:`preset_velocity` itself.
+
+    Args:
+        schedule: shared or per copy (then ``t`` is (B, ...)).
+        t: (...) time [s], >= 0, numpy or torch.
+        blend: window length 2h [s], >= 0.
+
+    Returns:
+        (..., 3) [m/s].
+    """
+    if blend == 0.0:
+        return preset_velocity(schedule, t)
+    t = _times(schedule, t)
+    xp = namespace_of(t)
+    half = 0.5 * blend
+    early = xp.maximum(t - half, 0.0)
+    before_start = xp.maximum(half - t, 0.0)[..., None]  # the part of the window before t = 0
+    first = preset_velocity(schedule, xp.zeros_like(t))
+    flown = preset_displacement(schedule, t + half) - preset_displacement(schedule, early)
+    return (flown + first * before_start) / blend
+
+
+def blend_offset(schedule: Schedule, t: Any, blend: float, preset: Any = None) -> Any:
+    """What the corner blend adds to the preset velocity now, ``v_b(t) - v^d(t)``
+    (:func:`blended_velocity`): zero away from switches, and 0.0 (a float) when ``blend`` is 0.
+
+    Args:
+        schedule: shared or per copy.
+        t: (...) time [s].
+        blend: window [s].
+        preset: ``preset_velocity(schedule, t)`` if already computed.
+
+    Returns:
+        (..., 3) [m/s], or 0.0.
+    """
+    if blend == 0.0:
+        return 0.0
+    if preset is None:
+        preset = preset_velocity(schedule, t)
+    return blended_velocity(schedule, t, blend) - preset
 
 
 def route_error(

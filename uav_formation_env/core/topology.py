@@ -19,15 +19,17 @@ call runs three phases in this order:
    min_i D_i < d^o (both swarm-wide: the UAV in range need not be the nearest one). With
    ``avoidance.turn_preview`` (T_p > 0), within T_p of a turn of the route the same test is also
    made along the next leg for the UAVs moved to where they will be at the turn (p + v^d times
-   the time left); an obstacle that only that test finds takes its sides from the next leg's
-   frame, and its groups' members are in range while either test holds (:func:`_turn_geometry`).
+   the time left), and its groups' members are in range while either test holds; any obstacle
+   that activates within that window takes its sides from each UAV's chord to the next leg, so
+   that an obstacle at a corner is passed on the inside of the bend (:func:`_turn_geometry`).
    At most one obstacle is active per copy: candidates wait while another obstacle is active,
    and an obstacle restored in this update frees the copy only from the next update on. If
    several obstacles are candidates at once, the one with the smallest min_i D_i wins (ties:
    lowest index). With ``avoidance.concurrent`` every candidate activates, whatever else is
    active (the joint rule of :func:`_avoidance_output`). At activation every UAV gets its side
-   s_i = +1 if λ_lat >= 0 else -1, fixed until the obstacle is done. Case 1 (all sides equal):
-   one group. Case 2: Σ+ and Σ-.
+   s_i = +1 if λ_lat >= 0 else -1 (λ in the chord's frame within a turn-preview window), fixed
+   until the obstacle is done: +1 passes with the obstacle on the right (clockwise round it).
+   Case 1 (all sides equal): one group. Case 2: Σ+ and Σ-.
 2. **Guides and ends.** Group slot 0 holds side +1, slot 1 side -1 (in case 1 the unused slot is
    empty). Every update, a group's guide is its in-range member that needs the largest turn
    towards the group's side to clear the safety circle (the signed angle from ê to the member's
@@ -108,6 +110,7 @@ from uav_formation_env.core.obstacles import (
 )
 from uav_formation_env.core.reference import (
     Schedule,
+    blend_offset,
     next_leg,
     preset_displacement,
     preset_velocity,
@@ -240,6 +243,7 @@ def _copy_state(state: TopologyState) -> TopologyState:
 
 
 _STATE_FIELDS = tuple(TopologyState.__dataclass_fields__)
+_CHORD_EPS = 1e-9  # a chord shorter than this has no direction [m]
 
 
 def update_topology(
@@ -300,9 +304,12 @@ def update_topology(
         raise ValueError(f"state has {n_obs} obstacles, the obstacle field has {n_config}")
     if t.shape != (batch,):
         t = xp.broadcast_to(t, (batch,))
-    preset = preset_velocity(schedule, t)  # (B, 3)
+    preset = preset_velocity(schedule, t)  # (B, 3): the track frame and the turn window
+    # the reference outside an avoidance: the preset velocity, its corners blended, plus the
+    # route return
+    smooth = preset + blend_offset(schedule, t, avoidance.turn_blend, preset)
     correction = route_correction(avoidance, schedule, t, positions, route_start)  # (B, 3)
-    base = preset if correction is None else preset + correction  # outside an avoidance
+    base = smooth if correction is None else smooth + correction
     if n_obs == 0:
         return state, _idle_output(xp, base, h0, batch, n_uav, n_obs, correction)
 
@@ -328,13 +335,13 @@ def update_topology(
         if not (detected & armed).any():
             if correction is not None and detected.any():  # see the route return below
                 correction = xp.where(detected.any(axis=1)[:, None], 0.0, correction)
-                base = preset + correction
+                base = smooth + correction
             return _copy_state(state), _idle_output(xp, base, h0, batch, n_uav, n_obs, correction)
     e_hat, _ = heading_frame(preset)
     rel_x, rel_y, dist, lon, lat = relative_geometry(positions, centres, e_hat)  # (O, N, B)
     near = in_range(lon, lat, r_safe_b)
     if turn is not None:  # in range along the next leg, from the positions at the turn
-        near_turn, dist_turn, lat_turn = turn
+        near_turn, dist_turn, chord_lat, window = turn
     slot_sides = constant_like(_SLOT_SIDES, positions)
 
     status = move_batch_last(state.status)  # (O, B), modified in place below
@@ -351,10 +358,10 @@ def update_topology(
     armed = _armed(status, avoidance.rearm)  # (O, B)
     candidate = near.any(axis=1) & (min_dist < r_detect_b)
     side_lat = lat
-    if turn is not None:  # met only along the next leg: its sides from that leg's frame
-        by_turn = near_turn.any(axis=1) & (amin(dist_turn, axis=1) < r_detect_b) & ~candidate
+    if turn is not None:  # also met along the next leg; near a turn, sides from the chords
+        by_turn = near_turn.any(axis=1) & (amin(dist_turn, axis=1) < r_detect_b)
         candidate = candidate | by_turn
-        side_lat = xp.where(by_turn[:, None], lat_turn, lat)
+        side_lat = xp.where(window, chord_lat, lat)
     candidate = candidate & armed & present
     if avoidance.concurrent:
         activated = candidate
@@ -409,7 +416,7 @@ def update_topology(
         detected = ((min_dist < r_detect_b) & present).any(axis=0)  # (B,)
         busy = (status == ACTIVE).any(axis=0) | detected
         correction = xp.where(busy[:, None], 0.0, correction)
-        base = preset + correction
+        base = smooth + correction
     output = _idle_output(xp, base, h0, batch, n_uav, n_obs, correction)
     output.activated = _contiguous_batch_first(activated)
     output.restored = _contiguous_batch_first(restored)
@@ -430,14 +437,22 @@ def _turn_geometry(
     preset: Any,
     centres: Any,
     r_safe: Any,
-) -> tuple[Any, Any, Any] | None:
-    """The range test along the next leg of the route, for copies within
-    ``avoidance.turn_preview`` of a turn; None when off or no copy is that close to one.
+) -> tuple[Any, Any, Any, Any] | None:
+    """The range test along the next leg of the route, and the chord frame that sides take, for
+    copies within ``avoidance.turn_preview`` of a turn; None when off or no copy is that close to
+    one.
 
-    Each UAV is moved to where it will be at the switch had it flown the preset velocity
-    (p + v^d (t_switch - t)), and judged in the next leg's track frame: an obstacle just past a
-    turn is out of range along the current leg until the turn, when the formation, still flying
-    the old leg at 20 m/s, has no room left to avoid it (docs/scenarios.md, turn preview).
+    Each UAV is moved to where it will be at the switch had it flown the preset velocity,
+    m = p + v^d (t_switch - t), and judged in the next leg's track frame (ê', λ'): an obstacle just
+    past a turn is out of range along the current leg until the turn, when the formation, still
+    flying the old leg at 20 m/s, has no room left to avoid it (docs/scenarios.md, turn preview).
+
+    Sides near a turn come from each UAV's *chord*: the line from p to the point of the next leg
+    abreast of the far edge of the obstacle's safety circle, c = m + ê' (max(-λ'_lon, 0) + R_s),
+    the way the UAV would cut the corner. λ^c = (p - o)·n̂_c, with n̂_c the chord's direction
+    rotated +90°, is then used as λ_lat. Judged along either leg alone, an obstacle in the corner
+    sends (part of) the formation round the outside of the bend, and it loops back to the next
+    leg 100-240 m behind the route point (`random_swarm` seeds 38, 57, 87; docs/scenarios.md).
 
     Args:
         avoidance: ``turn_preview`` [s].
@@ -449,9 +464,9 @@ def _turn_geometry(
         r_safe: R_s broadcastable to (O, N, B) [m].
 
     Returns:
-        ``(near, dist, lat)``: the in-range flags (O, N, B) (False outside the window), the
-        distances D (O, N, B) [m] and λ_lat (O, N, B) [m] of the moved positions in the next
-        leg's frame.
+        ``(near, dist, chord_lat, window)``: the in-range flags (O, N, B) (False outside the
+        window) and the distances D (O, N, B) [m] of the moved positions in the next leg's frame;
+        λ^c (O, N, B) [m] (meaningful in window copies only); the copies within the window (B,).
     """
     if avoidance.turn_preview == 0.0:
         return None
@@ -463,9 +478,23 @@ def _turn_geometry(
         return None
     moved = positions + preset[:, None, :] * xp.where(window, wait, 0.0)[:, None, None]
     e_next, _ = heading_frame(v_next)
-    _, _, dist, lon, lat = relative_geometry(moved, centres, e_next)
+    rel_x, rel_y, dist, lon, lat = relative_geometry(moved, centres, e_next)
     near = in_range(lon, lat, r_safe) & window
-    return near, dist, lat
+    # the chord c - p = (m - o) + ê' ahead - (p - o), batch-last (O, N, B)
+    ahead = xp.maximum(-lon, 0.0) + r_safe
+    e_now, _ = heading_frame(preset)
+    now_x, now_y, _, lon_now, lat_now = relative_geometry(positions, centres, e_now)
+    chord_x = rel_x + e_next[:, 0] * ahead - now_x
+    chord_y = rel_y + e_next[:, 1] * ahead - now_y
+    # zero only where a U-turn brings c back onto p: no direction, so λ^c = 0 there
+    length = xp.maximum(xp.sqrt(chord_x**2 + chord_y**2), _CHORD_EPS)
+    chord_lat = (now_y * chord_x - now_x * chord_y) / length  # (p - o)·n̂_c
+    # an obstacle whose safety circle ends before the turn point is passed on the current leg:
+    # its chord runs along ê, λ^c = λ_lat (random_fields seed 48: O1 45 m before the turn, the
+    # chord to the next leg sent the 80 m wide formation round its inside, 107 m off the route)
+    to_turn = xp.sqrt(preset[:, 0] ** 2 + preset[:, 1] ** 2) * wait  # (m - p)·ê, (B,) [m]
+    before_turn = lon_now + to_turn >= r_safe
+    return near, dist, xp.where(before_turn, lat_now, chord_lat), window
 
 
 def _armed(status: Any, rearm: bool) -> Any:
