@@ -283,8 +283,9 @@ class AvoidanceConfig:
     split_graph: str = "complete"
     # turn preview: within this long before a turn of the route, an obstacle is also judged
     # along the next leg from where each UAV will be at the turn (its position plus the preset
-    # velocity until the switch), so an obstacle just past a turn activates before the turn;
-    # 0 is the paper (the current leg only) [s]
+    # velocity until the switch), so an obstacle just past a turn activates before the turn, and
+    # within it sides come from each UAV's chord to the next leg (a corner obstacle is passed on
+    # the inside of the bend); 0 is the paper (the current leg only) [s]
     turn_preview: float = 0.0
     # corner blend: outside an avoidance the reference is the preset velocity averaged over a
     # window this long centred on now, so that a turn of the route ramps over the window instead
