@@ -224,6 +224,25 @@ def test_readme_gpu_reproduction_command_runs_on_the_cpu(tmp_path) -> None:
     assert (tmp_path / "table2.csv").is_file()
 
 
+def _fly_lfpio(
+    scenario, backend: str, device: str, steps: int
+) -> tuple[list, list, NashDMPCPolicy]:
+    """LFPIO over ``steps`` steps of seeds 3 and 8 on ``backend``: its actions and the states
+    after each step (copies, in the backend's library) and the policy."""
+    kwargs = {"device": device} if backend == "torch" else {}
+    episodes = FormationEpisodes(scenario, 2, backend=backend, **kwargs)
+    policy = NashDMPCPolicy(scenario, "lfpio")
+    policy.reset(2, seeds=[3, 8])
+    step = episodes.reset(seed=[3, 8])
+    actions, states = [], []
+    for _ in range(steps):
+        action = policy.act_batch(step.observation, step.neighbour_index)
+        step = episodes.step(action)
+        actions.append(action.clone() if isinstance(action, torch.Tensor) else action.copy())
+        states.append(to_numpy(step.result.z).copy())
+    return actions, states, policy
+
+
 @pytest.mark.parametrize("device", DEVICES)
 def test_local_layout_dmpc_on_torch_equals_numpy(device: str) -> None:
     """The N-independent local observation: the torch policy decodes its slots and exchanges
@@ -233,19 +252,10 @@ def test_local_layout_dmpc_on_torch_equals_numpy(device: str) -> None:
     scenario = with_overrides(paper_scenario(), {"observation.kind": "local"})
     runs = []
     for backend in ("numpy", "torch"):
-        kwargs = {"device": device} if backend == "torch" else {}
-        episodes = FormationEpisodes(scenario, 2, backend=backend, **kwargs)
-        policy = NashDMPCPolicy(scenario, "lfpio")
-        policy.reset(2, seeds=[3, 8])
-        step = episodes.reset(seed=[3, 8])
-        states = []
-        for _ in range(15):
-            action = policy.act_batch(step.observation, step.neighbour_index)
-            step = episodes.step(action)
-            states.append(to_numpy(step.result.z).copy())
-        assert isinstance(action, torch.Tensor) == (backend == "torch")
+        actions, states, policy = _fly_lfpio(scenario, backend, device, 15)
+        assert isinstance(actions[-1], torch.Tensor) == (backend == "torch")
         assert policy.records().triggered.sum() > 0
-        runs.append(np.stack(states))
+        runs.append(np.stack([to_numpy(z) for z in states]))
     np.testing.assert_allclose(runs[1], runs[0], rtol=1e-9, atol=1e-9)
 
 
@@ -269,16 +279,7 @@ def test_dmpc_with_the_obstacle_term_on_torch_equals_numpy(device: str, kind: st
     without = with_overrides(scenario, {"cost.obstacle": 0.0})
     runs = []
     for backend, sc in (("numpy", scenario), ("torch", scenario), ("numpy", without)):
-        kwargs = {"device": device} if backend == "torch" else {}
-        episodes = FormationEpisodes(sc, 2, backend=backend, **kwargs)
-        policy = NashDMPCPolicy(sc, "lfpio")
-        policy.reset(2, seeds=[3, 8])
-        step = episodes.reset(seed=[3, 8])
-        actions = []
-        for _ in range(10):
-            action = policy.act_batch(step.observation, step.neighbour_index)
-            step = episodes.step(action)
-            actions.append(to_numpy(action).copy())
-        runs.append(np.stack(actions))
+        actions, _, _ = _fly_lfpio(sc, backend, device, 10)
+        runs.append(np.stack([to_numpy(u) for u in actions]))
     np.testing.assert_allclose(runs[1], runs[0], rtol=1e-9, atol=1e-11)
     assert np.abs(runs[2] - runs[0]).max() > 0.1  # the term acted

@@ -281,7 +281,8 @@ def blended_velocity(schedule: Schedule, t: Any, blend: float) -> Any:
     ends h late and the distance flown is the same: the route point is reached again at
     ``t_s + h``. A switch of eq. 23 asks for an infinite acceleration; a 90-degree turn at
     20 m/s with 5 m/s^2 per axis takes 4 s, and a formation tracking the sharp switch overshoots
-    the corner by 30-60 m (docs/scenarios.md, "Corners of the route"). ``blend = 0`` is
+    the corner by 30-60 m (docs/scenarios.md, the corner blend among the rules measured and not
+    shipped). ``blend = 0`` is
     :func:`preset_velocity` itself.
 
     Args:
@@ -304,7 +305,7 @@ def blended_velocity(schedule: Schedule, t: Any, blend: float) -> Any:
     return (flown + first * before_start) / blend
 
 
-def blend_offset(schedule: Schedule, t: Any, blend: float, preset: Any = None) -> Any:
+def blend_offset(schedule: Schedule, t: Any, blend: float) -> Any:
     """What the corner blend adds to the preset velocity now, ``v_b(t) - v^d(t)``
     (:func:`blended_velocity`): zero away from switches, and 0.0 (a float) when ``blend`` is 0.
 
@@ -312,16 +313,13 @@ def blend_offset(schedule: Schedule, t: Any, blend: float, preset: Any = None) -
         schedule: shared or per copy.
         t: (...) time [s].
         blend: window [s].
-        preset: ``preset_velocity(schedule, t)`` if already computed.
 
     Returns:
         (..., 3) [m/s], or 0.0.
     """
     if blend == 0.0:
         return 0.0
-    if preset is None:
-        preset = preset_velocity(schedule, t)
-    return blended_velocity(schedule, t, blend) - preset
+    return blended_velocity(schedule, t, blend) - preset_velocity(schedule, t)
 
 
 def route_error(

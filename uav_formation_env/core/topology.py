@@ -110,7 +110,7 @@ from uav_formation_env.core.obstacles import (
 )
 from uav_formation_env.core.reference import (
     Schedule,
-    blend_offset,
+    blended_velocity,
     next_leg,
     preset_displacement,
     preset_velocity,
@@ -307,7 +307,8 @@ def update_topology(
     preset = preset_velocity(schedule, t)  # (B, 3): the track frame and the turn window
     # the reference outside an avoidance: the preset velocity, its corners blended, plus the
     # route return
-    smooth = preset + blend_offset(schedule, t, avoidance.turn_blend, preset)
+    blend = avoidance.turn_blend
+    smooth = preset if blend == 0.0 else blended_velocity(schedule, t, blend)
     correction = route_correction(avoidance, schedule, t, positions, route_start)  # (B, 3)
     base = smooth if correction is None else smooth + correction
     if n_obs == 0:
@@ -452,7 +453,7 @@ def _turn_geometry(
     the way the UAV would cut the corner. λ^c = (p - o)·n̂_c, with n̂_c the chord's direction
     rotated +90°, is then used as λ_lat. Judged along either leg alone, an obstacle in the corner
     sends (part of) the formation round the outside of the bend, and it loops back to the next
-    leg 100-240 m behind the route point (`random_swarm` seeds 38, 57, 87; docs/scenarios.md).
+    leg 180-230 m behind the route point (`random_swarm` seeds 38, 57, 87; docs/scenarios.md).
 
     Args:
         avoidance: ``turn_preview`` [s].
