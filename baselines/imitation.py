@@ -41,7 +41,7 @@ from uav_formation_baselines import HYPERPARAMS_DIR
 from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.torch_policy import ACTIVATIONS, NormalisedMLP, save_policy
 from uav_formation_env.cli import OneLineParser
-from uav_formation_env.config import Scenario
+from uav_formation_env.config import CostConfig, Scenario
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation import run_episode_groups, summarise_groups
@@ -49,7 +49,14 @@ from uav_formation_env.policies import DMPC_OPTIMIZERS, make_policy
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
 from uav_formation_env.scenes import seeds_by_n_uav
 
-__all__ = ["ImitationConfig", "collect", "load_config", "sample_weights", "train_imitation"]
+__all__ = [
+    "ImitationConfig",
+    "collect",
+    "load_config",
+    "sample_weights",
+    "teacher_scenario",
+    "train_imitation",
+]
 
 
 @dataclass(frozen=True)
@@ -89,6 +96,12 @@ class ImitationConfig:
         validation_seeds: validation episodes per round [-].
         seed_start, validation_seed_start: first training / validation episode seed.
         overrides: scenario field overrides (e.g. ``{observation: {kind: local}}``).
+        teacher_cost: overrides of the teacher's own J_i (``cost`` fields, e.g. J_i's obstacle
+            clearance term ``{obstacle: 100, obstacle_lookahead: 10}``); the environment, its
+            reward and the evaluation keep the scenario's. A clone's small action errors turn a
+            teacher's grazing pass into a collision: on the 20 paper seeds the exact teacher
+            passes O1 (radius 30 m) 31.5 m from its centre at the closest, and 39.2 m with the
+            clearance term, at a lower paper J (6.55e5 against 7.35e5).
     """
 
     teacher: str = "exact"
@@ -111,6 +124,7 @@ class ImitationConfig:
     seed_start: int = 10_000
     validation_seed_start: int = 5_000
     overrides: dict[str, Any] = field(default_factory=dict)
+    teacher_cost: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.teacher not in DMPC_OPTIMIZERS:
@@ -154,6 +168,12 @@ class ImitationConfig:
             raise ValueError(f"hidden must be a list of integers >= 1, got {self.hidden!r}")
         object.__setattr__(self, "hidden", hidden)
         object.__setattr__(self, "masked_slots", tuple(int(s) for s in self.masked_slots))
+        cost_fields = {f.name for f in fields(CostConfig)}
+        if not isinstance(self.teacher_cost, dict) or not set(self.teacher_cost) <= cost_fields:
+            raise ValueError(
+                f"teacher_cost must map cost fields ({sorted(cost_fields)}) to values, "
+                f"got {self.teacher_cost!r}"
+            )
 
     @classmethod
     def from_mapping(
@@ -186,6 +206,7 @@ def collect(
     teacher_probability: float = 1.0,
     mix_seed: int = 0,
     n_steps: int | None = None,
+    teacher_scenario: Scenario | None = None,
 ) -> tuple[np.ndarray, ...]:
     """Fly one episode per seed and label every UAV-step with the teacher's action.
 
@@ -199,6 +220,8 @@ def collect(
             learner's otherwise).
         mix_seed: seed of the coin flips.
         n_steps: control steps flown per episode (None: the whole episode).
+        teacher_scenario: the scenario the teacher plans with (None: ``scenario``); it must
+            observe as ``scenario`` does (e.g. its J_i alone differs).
 
     Returns:
         ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m], clearance (M,) [m])``
@@ -209,7 +232,11 @@ def collect(
     observations, labels, nearest, clearance = [], [], [], []
     for n_uav, group in seeds_by_n_uav(scenario, seeds).items():
         episodes = FormationEpisodes(scenario, len(group), fly_on_after_collision=True, n_uav=n_uav)
-        teacher = NashDMPCPolicy(scenario, teacher_name, threshold=teacher_threshold)
+        teacher = NashDMPCPolicy(
+            scenario if teacher_scenario is None else teacher_scenario,
+            teacher_name,
+            threshold=teacher_threshold,
+        )
         teacher.reset(len(group), seeds=group)
         step = episodes.reset(seed=group)
         links = getattr(teacher, "needs_neighbour_index", False)
@@ -229,6 +256,14 @@ def collect(
                 action = np.where(use_teacher[:, None, None], label, own)
             step = episodes.step(action)
     return tuple(np.concatenate(part) for part in (observations, labels, nearest, clearance))
+
+
+def teacher_scenario(scenario: Scenario, config: ImitationConfig) -> Scenario:
+    """The scenario the teacher plans with: ``scenario`` with ``config.teacher_cost`` over its
+    cost (an unknown cost field is a ``ValueError`` naming it)."""
+    if not config.teacher_cost:
+        return scenario
+    return with_overrides(scenario, {"cost": dict(config.teacher_cost)})
 
 
 def sample_weights(
@@ -308,6 +343,7 @@ def train_imitation(
     out = Path(out)
     (out / "rounds").mkdir(parents=True, exist_ok=True)
     save_scenario(scen, out / "scenario.yaml")
+    teacher_scen = teacher_scenario(scen, config)
     started = time.perf_counter()
     validation = list(
         range(config.validation_seed_start, config.validation_seed_start + config.validation_seeds)
@@ -336,6 +372,7 @@ def train_imitation(
                 config.beta**r if r else 1.0,
                 mix_seed=seed * 1000 + 10 * r + part,
                 n_steps=steps,
+                teacher_scenario=teacher_scen,
             )
             all_obs.append(obs)
             all_actions.append(actions)

@@ -17,6 +17,7 @@ from uav_formation_baselines.imitation import (  # noqa: E402
     load_config,
     main,
     sample_weights,
+    teacher_scenario,
     train_imitation,
 )
 from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
@@ -83,6 +84,28 @@ def test_learner_rollout_follows_the_learner_and_is_labelled_by_the_teacher() ->
         np.testing.assert_array_equal(obs[k * 5 : (k + 1) * 5], step.observation[0])
         step = episodes.step(np.zeros((1, 5, 3)))  # the learner's action was executed
     assert np.abs(labels).max() > 0.01  # labels are the teacher's, not the learner's zeros
+
+
+def test_teacher_cost_changes_the_teachers_labels_only() -> None:
+    config = ImitationConfig(teacher_cost={"n": 40.0})  # the teacher tracks velocity harder
+    planner = teacher_scenario(SHORT, config)
+    assert planner.cost.n == 40.0 and SHORT.cost.n == 10.0
+    assert teacher_scenario(SHORT, ImitationConfig()) is SHORT
+    obs, labels, _, _ = collect(SHORT, "exact", [3], teacher_scenario=planner)
+    plain_obs, plain_labels, _, _ = collect(SHORT, "exact", [3])
+    # the first step's observation is the environment's either way; its label is the override's
+    np.testing.assert_array_equal(obs[:5], plain_obs[:5])
+    assert np.abs(labels[:5] - plain_labels[:5]).max() > 1e-3
+    episodes = FormationEpisodes(SHORT, 1, fly_on_after_collision=True)
+    teacher = NashDMPCPolicy(planner, "exact", threshold=0.0)
+    teacher.reset(1, seeds=[3])
+    step = episodes.reset(seed=[3])
+    for k in range(10):
+        action = teacher.act_batch(step.observation)
+        np.testing.assert_allclose(labels[k * 5 : (k + 1) * 5], action[0], atol=1e-6)
+        step = episodes.step(action)
+    with pytest.raises(ValueError, match="teacher_cost must map cost fields"):
+        ImitationConfig(teacher_cost={"obstacel": 100.0})
 
 
 def test_masked_slot_is_never_seen_and_export_round_trips(tmp_path: Path) -> None:
