@@ -465,6 +465,17 @@ def test_paper_sequence_single_copy_current_speed_base_graph(device):
 
 
 @pytest.mark.parametrize("device", DEVICES)
+def test_paper_sequence_with_pace_keeping(device):
+    scenario = make_scenario()
+    avoidance = replace(scenario.avoidance, pace_limit=1.4)
+    setup, frames = record(replace(scenario, avoidance=avoidance), batch=2, seed=2, steps=380)
+    outputs = replay(setup, frames, device)
+    exercised(outputs)
+    speeds = [np.linalg.norm(o.reference_velocity[o.avoiding], axis=-1) for o in outputs]
+    assert max(s.max() for s in speeds if s.size) > 20.5  # the pace rule ran
+
+
+@pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("name", ["random_routes", "random_fields"])
 def test_drawn_per_copy_fields_and_routes_equal(device, name):
     scenario = SCENARIOS[name]()

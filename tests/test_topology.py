@@ -349,6 +349,32 @@ def test_current_reference_speed_option():
     np.testing.assert_allclose(np.linalg.norm(out.reference_velocity[0], axis=1), 25.0)
 
 
+@pytest.mark.parametrize(
+    ("guide", "speed"),
+    [
+        # D = 70.7 m: the tangent is 26.35° off +x, cos 0.896: 20 / 0.896 = 22.31 m/s
+        ((-70.0, 10.0), 22.31),
+        # D = 45.3 m: 55.7° off +x, cos 0.563 < 1 / 1.4: the limit, 1.4 x 20 = 28 m/s
+        ((-45.0, 5.0), 28.0),
+    ],
+)
+def test_pace_limit_keeps_the_preset_pace_along_the_route(guide, speed):
+    xy = [guide, (-60.0, 30.0)]
+    _, plain = step(xy)
+    paced_avoidance = dataclasses.replace(ONE, pace_limit=1.4)
+    _, paced = step(xy, avoidance=paced_avoidance)
+    np.testing.assert_allclose(np.linalg.norm(plain.reference_velocity[0], axis=1), 20.0)
+    ref = paced.reference_velocity[0]
+    np.testing.assert_allclose(np.linalg.norm(ref, axis=1), speed, rtol=2e-4)
+    # the same tangent directions, only faster
+    direction = ref / np.linalg.norm(ref, axis=1, keepdims=True)
+    np.testing.assert_allclose(direction, plain.reference_velocity[0] / 20.0, atol=1e-12)
+    if speed < 28.0:  # its part along the route is the preset speed
+        np.testing.assert_allclose(ref[:, 0], 20.0)
+    with pytest.raises(ValueError, match="avoidance.pace_limit"):
+        dataclasses.replace(ONE, pace_limit=0.5)
+
+
 # --- end and restore ----------------------------------------------------------------------------
 
 

@@ -292,11 +292,18 @@ class AvoidanceConfig:
     # of switching at once (core/reference.py: blended_velocity); the route point is the same
     # once the window has passed; 0 is the paper (the preset velocity of eq. 23) [s]
     turn_blend: float = 0.0
+    # pace keeping: an avoiding group's tangent speed is |v^d| / cos(angle of the tangent to the
+    # preset direction), at most pace_limit x |v^d|, so it keeps the route point's pace along the
+    # route while it goes round; 1 is the paper (|v^d| along the tangent) [-]
+    pace_limit: float = 1.0
 
     def __post_init__(self) -> None:
         _non_negative(self.route_gain, "avoidance.route_gain")
         _non_negative(self.turn_preview, "avoidance.turn_preview")
         _non_negative(self.turn_blend, "avoidance.turn_blend")
+        _require(
+            self.pace_limit >= 1.0, "avoidance.pace_limit", f"must be >= 1, got {self.pace_limit!r}"
+        )
         _non_negative(self.route_correction_max, "avoidance.route_correction_max")
         _require(
             self.split_graph in ("complete", "base"),

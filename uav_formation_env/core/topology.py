@@ -659,6 +659,10 @@ def _avoidance_output(
     else:
         g_vel = velocities[cols, g]  # (O, 2, B, 3)
         speed = xp.maximum(xp.sqrt((g_vel**2).sum(axis=3)), avoidance.min_reference_speed)
+    if avoidance.pace_limit > 1.0:  # keep the route point's pace along the preset direction
+        horizontal = xp.sqrt(preset[:, 0] ** 2 + preset[:, 1] ** 2)  # (B,)
+        along = (lx * preset[:, 0] + ly * preset[:, 1]) / xp.maximum(horizontal, 1e-9)
+        speed = speed / xp.maximum(along, 1.0 / avoidance.pace_limit)
     vx, vy = speed * lx, speed * ly  # (O, 2, B)
     uav_index = xp.arange(n_uav, device=at)[:, None]
     slot = xp.astype(minus[chosen, uav_index, cols], xp.int64)  # (N, B)
