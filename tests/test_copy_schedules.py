@@ -14,6 +14,7 @@ from uav_formation_env.core.local_observation import decode_local_observations
 from uav_formation_env.core.observation import require_decodable
 from uav_formation_env.core.reference import (
     blend_offset,
+    blended_velocity,
     copy_schedules,
     next_leg,
     preset_displacement,
@@ -76,7 +77,9 @@ def test_each_copy_flies_its_own_drawn_route_and_a_seed_names_it():
             s.step(consensus_pd(s.z, last.reference_velocity, last.adjacency, s.offsets, 5.0))
         free = ~sim.last.avoiding  # (B, N): UAVs on the preset velocity
         for b in range(3):
-            own = preset_velocity(sim.scenes[b].schedule, sim.t[b]) + sim.last.route_correction[b]
+            blend = ROUTES.avoidance.turn_blend  # the drawn scenarios' corners ramp
+            own = blended_velocity(sim.scenes[b].schedule, sim.t[b], blend)
+            own = own + sim.last.route_correction[b]
             mine = sim.last.reference_velocity[b][free[b]]
             np.testing.assert_array_equal(mine, np.broadcast_to(own, mine.shape))
     np.testing.assert_array_equal(alone.z[0], sim.z[1])

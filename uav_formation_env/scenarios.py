@@ -30,8 +30,9 @@ Named scenarios of this module (registered in :data:`uav_formation_env.config_io
 
 All of them but the paper's fly the avoidance rules of :data:`DRAWN_AVOIDANCE` beyond the
 paper's: obstacles activate concurrently, a done obstacle re-arms, between avoidances the
-reference leads the formation back to its preset route, and near a turn an obstacle on the next
-leg activates before the turn (docs/scenarios.md, where each rule's
+reference leads the formation back to its preset route, near a turn an obstacle on the next
+leg activates before the turn, a turn of the route ramps over 4 s and an avoiding group keeps
+the route's pace (docs/scenarios.md, where each rule's
 effect on the reference policy is measured). The drawn scenarios' J_i has the obstacle
 clearance term of :data:`DRAWN_COST` (docs/deviations.md §8); the swarms' has not.
 
@@ -229,6 +230,10 @@ DRAWN_AVOIDANCE = {
     "route_gain": 0.05,
     "route_correction_max": 5.0,
     "turn_preview": 5.0,
+    # a turn ramps over 4 s and an avoiding group keeps the route's pace (at most 1.2 x |v^d|):
+    # random_fields 94 -> 96, random_swarm 87 -> 93 of 100 (docs/scenarios.md, "Corners and pace")
+    "turn_blend": 4.0,
+    "pace_limit": 1.2,
 }
 # J_i's obstacle clearance term (docs/deviations.md §8): 100 / m² within the 10 m safety margin,
 # over the horizon and 2 s of free flight beyond it (10 steps: the 40 m a UAV needs to stop from
