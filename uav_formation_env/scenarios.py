@@ -31,8 +31,8 @@ Named scenarios of this module (registered in :data:`uav_formation_env.config_io
 All of them but the paper's fly the avoidance rules of :data:`DRAWN_AVOIDANCE` beyond the
 paper's: obstacles activate concurrently, a done obstacle re-arms, between avoidances the
 reference leads the formation back to its preset route, near a turn an obstacle on the next
-leg activates before the turn, a turn of the route ramps over 4 s and an avoiding group keeps
-the route's pace (docs/scenarios.md, where each rule's
+leg activates before the turn, and (not in ``swarm_N``) a turn of the route ramps over 4 s and
+an avoiding group keeps the route's pace (docs/scenarios.md, where each rule's
 effect on the reference policy is measured). The drawn scenarios' J_i has the obstacle
 clearance term of :data:`DRAWN_COST` (docs/deviations.md §8); the swarms' has not.
 
@@ -317,8 +317,13 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
         initial=start_box_for(base.initial, n_uav),
         # inside a sub-formation H0's own edges, not the complete graph: with 64 in-neighbours
         # the formation term outweighed the avoidance reference (docs/scenarios.md, swarm_100)
+        # nor the corner blend and pace keeping: with them swarm_100's grid, faster round O1 and
+        # without J_i's obstacle term, had UAVs inside O1 at 12 s (both seeds; docs/scenarios.md)
         avoidance=replace(
-            base.avoidance, obstacles=obstacles, split_graph="base", **DRAWN_AVOIDANCE
+            base.avoidance,
+            obstacles=obstacles,
+            split_graph="base",
+            **{**DRAWN_AVOIDANCE, "turn_blend": 0.0, "pace_limit": 1.0},
         ),
         # no obstacle term (DRAWN_COST): in the 10 m grid, UAVs braking for O1 on their own
         # (before the topology splits the grid) were run into from behind: swarm_100 seed 0 had
