@@ -51,7 +51,10 @@ call runs three phases in this order:
    ``avoiding`` and should hold this reference over the whole MPC horizon (see
    :func:`reference_preview`). Everyone else follows the preset velocity, but keeps the split
    adjacency until the restore. V_ref = ||preset velocity|| (``reference_speed="preset"``) or
-   max(||v_guide||, min_reference_speed) (``"current"``).
+   max(||v_guide||, min_reference_speed) (``"current"``); with ``pace_limit`` > 1 it is divided
+   by cos θ (θ the tangent's angle to the preset direction), up to ``pace_limit`` x V_ref, so
+   the group keeps the route point's pace along the route (docs/scenarios.md, "Corners and
+   pace").
 
 Further decisions:
 
