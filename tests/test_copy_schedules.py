@@ -75,10 +75,9 @@ def test_each_copy_flies_its_own_drawn_route_and_a_seed_names_it():
         for s in (sim, alone):
             last = s.last
             s.step(consensus_pd(s.z, last.reference_velocity, last.adjacency, s.offsets, 5.0))
-        free = ~sim.last.avoiding  # (B, N): UAVs on the preset velocity
+        free = ~sim.last.avoiding  # (B, N): UAVs on the preset velocity, corners blended
         for b in range(3):
-            blend = ROUTES.avoidance.turn_blend  # the drawn scenarios' corners ramp
-            own = blended_velocity(sim.scenes[b].schedule, sim.t[b], blend)
+            own = blended_velocity(sim.scenes[b].schedule, sim.t[b], ROUTES.avoidance.turn_blend)
             own = own + sim.last.route_correction[b]
             mine = sim.last.reference_velocity[b][free[b]]
             np.testing.assert_array_equal(mine, np.broadcast_to(own, mine.shape))

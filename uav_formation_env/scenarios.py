@@ -31,8 +31,9 @@ Named scenarios of this module (registered in :data:`uav_formation_env.config_io
 All of them but the paper's fly the avoidance rules of :data:`DRAWN_AVOIDANCE` beyond the
 paper's: obstacles activate concurrently, a done obstacle re-arms, between avoidances the
 reference leads the formation back to its preset route, near a turn an obstacle on the next
-leg activates before the turn, and (not in ``swarm_N``) a turn of the route ramps over 4 s and
-an avoiding group keeps the route's pace (docs/scenarios.md, where each rule's
+leg activates before the turn; in the drawn scenarios (:data:`DRAWN_CORNERS`, not ``swarm_N``)
+a turn of the route also ramps over 4 s and an avoiding group keeps the route's pace
+(docs/scenarios.md, where each rule's
 effect on the reference policy is measured). The drawn scenarios' J_i has the obstacle
 clearance term of :data:`DRAWN_COST` (docs/deviations.md §8); the swarms' has not.
 
@@ -230,11 +231,11 @@ DRAWN_AVOIDANCE = {
     "route_gain": 0.05,
     "route_correction_max": 5.0,
     "turn_preview": 5.0,
-    # a turn ramps over 4 s and an avoiding group keeps the route's pace (at most 1.2 x |v^d|):
-    # random_fields 94 -> 96, random_swarm 87 -> 93 of 100 (docs/scenarios.md, "Corners and pace")
-    "turn_blend": 4.0,
-    "pace_limit": 1.2,
 }
+# the drawn scenarios' only (not swarm_N's): a turn ramps over 4 s and an avoiding group keeps
+# the route's pace (at most 1.2 x |v^d|): random_fields 94 -> 96, random_swarm 87 -> 93 of 100
+# (docs/scenarios.md, "Corners and pace")
+DRAWN_CORNERS = {"turn_blend": 4.0, "pace_limit": 1.2}
 # J_i's obstacle clearance term (docs/deviations.md §8): 100 / m² within the 10 m safety margin,
 # over the horizon and 2 s of free flight beyond it (10 steps: the 40 m a UAV needs to stop from
 # 20 m/s at 5 m/s^2); on random_fields it took the colliding seeds from 14 to 0 of 100
@@ -251,7 +252,7 @@ def _drawn(name: str, scene: SceneConfig, observation: ObservationConfig | None 
     return replace(
         base,
         name=name,
-        avoidance=replace(base.avoidance, **DRAWN_AVOIDANCE),
+        avoidance=replace(base.avoidance, **DRAWN_AVOIDANCE, **DRAWN_CORNERS),
         cost=replace(base.cost, **DRAWN_COST),
         scene=scene,
         observation=base.observation if observation is None else observation,
@@ -317,13 +318,10 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
         initial=start_box_for(base.initial, n_uav),
         # inside a sub-formation H0's own edges, not the complete graph: with 64 in-neighbours
         # the formation term outweighed the avoidance reference (docs/scenarios.md, swarm_100)
-        # nor the corner blend and pace keeping: with them swarm_100's grid, faster round O1 and
-        # without J_i's obstacle term, had UAVs inside O1 at 12 s (both seeds; docs/scenarios.md)
+        # not DRAWN_CORNERS: with them swarm_100's grid, faster round O1 and without J_i's
+        # obstacle term, had UAVs inside O1 at 12 s (both seeds; docs/scenarios.md)
         avoidance=replace(
-            base.avoidance,
-            obstacles=obstacles,
-            split_graph="base",
-            **{**DRAWN_AVOIDANCE, "turn_blend": 0.0, "pace_limit": 1.0},
+            base.avoidance, obstacles=obstacles, split_graph="base", **DRAWN_AVOIDANCE
         ),
         # no obstacle term (DRAWN_COST): in the 10 m grid, UAVs braking for O1 on their own
         # (before the topology splits the grid) were run into from behind: swarm_100 seed 0 had
