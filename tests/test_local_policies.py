@@ -153,6 +153,20 @@ def test_random_swarm_runs_grouped_by_drawn_n():
     assert summary["policy_time_per_step_s"] == pytest.approx(policy_seconds / n_steps)
 
 
+def test_seeds_of_one_drawn_n_run_without_naming_it():
+    # `uav-formation evaluate --scenario random_swarm --seeds 1` and `uav-formation run`: the
+    # batch takes the N its seeds draw; seeds of several N are refused with the way out
+    policy = make_policy("heuristic", SWARM)
+    n_uav = {s: draw_scene(SWARM, np.random.default_rng(s)).n_uav for s in (0, 1, 4)}
+    (group,) = run_episode_groups(SWARM, policy, [4])
+    alone = run_episodes(SWARM, policy, [4])
+    assert group.z.shape[2] == alone.z.shape[2] == n_uav[4]
+    np.testing.assert_array_equal(group.z, alone.z)
+    assert n_uav[0] != n_uav[1]
+    with pytest.raises(ValueError, match=r"seeds draw different N .*run_episode_groups"):
+        run_episodes(SWARM, policy, [0, 1])
+
+
 def test_a_seed_flies_the_same_alone_and_in_its_group():
     policy = make_policy("lfpio", SWARM, seed=0)
     groups = run_episode_groups(SWARM, policy, [0, 1, 2, 3])

@@ -133,8 +133,8 @@ def run_episodes(
     """Run one episode per seed, all seeds as one batch, with one ``act_batch`` call per step.
 
     Copy b is seeded with ``seeds[b]`` (a copy reproduces a one-seed run of that seed). A
-    scenario that draws N per reset needs ``n_uav`` and seeds that all draw it
-    (:func:`run_episode_groups` groups them).
+    scenario that draws N per reset needs seeds that all draw one N, ``n_uav`` (None: the N
+    they draw); :func:`run_episode_groups` groups seeds of several N.
 
     Args:
         scenario: the scenario.
@@ -150,7 +150,8 @@ def run_episodes(
             equilibrium of the horizon game (:func:`policy_plans`,
             :func:`~uav_formation_env.policies.nash.nash_gap`); not counted in the policy's
             wall time.
-        n_uav: N of a scenario that draws N per reset (None: the scenario's one N).
+        n_uav: N of a scenario that draws N per reset (None: the scenario's one N, or the N
+            that all ``seeds`` draw).
         backend: the array library of the episode layer, ``"numpy"`` or ``"torch"``
             (:mod:`uav_formation_env.core.array_api`); with torch, a policy whose
             ``accepts_tensors`` is true (the DMPC metaheuristics, either layout) gets the
@@ -163,6 +164,14 @@ def run_episodes(
     seeds = [check_seed(s, f"seeds[{k}]") for k, s in enumerate(seeds)]
     if not seeds or None in seeds:
         raise ValueError("seeds must be a non-empty list of non-negative ints")
+    if n_uav is None and scenario.scene is not None:
+        drawn = seeds_by_n_uav(scenario, seeds)
+        if len(drawn) > 1:
+            raise ValueError(
+                f"seeds draw different N ({sorted(drawn)}); one batch has one N: run them with "
+                "run_episode_groups, or pass n_uav"
+            )
+        n_uav = next(iter(drawn))
     batch, n_steps = len(seeds), scenario.n_steps
     # evaluation's rule: every seed is flown to its end, collisions are counted, not ended on
     episodes = FormationEpisodes(
