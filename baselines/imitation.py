@@ -2,6 +2,7 @@
 
     python -m uav_formation_baselines.imitation --scenario paper --out runs/bc_paper \
         [--seed 0] [--set rounds=6 episodes=16 ...]
+    python -m uav_formation_baselines.imitation --out runs/bc_paper --select 40
 
 The teacher is a reference DMPC of the registry (``exact`` best response by default: the cheapest
 per step, and no cheaper-looking than LFPIO on the mission). Round 0 flies the teacher's own
@@ -23,6 +24,8 @@ and the learner must then use the N-independent observation (``observation.kind:
 The output directory holds ``policy.pt`` (load with ``uav-formation evaluate --policy DIR``),
 ``config.yaml`` (the resolved configuration, scenario name, seed, wall time), ``scenario.yaml``,
 ``rounds.csv`` (per round: samples, loss, validation completion and cost) and ``rounds/``.
+``--select SEEDS`` chooses a finished run's ``policy.pt`` again on more validation seeds
+(:func:`select_round`).
 """
 
 from __future__ import annotations
@@ -42,7 +45,12 @@ from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.torch_policy import ACTIVATIONS, NormalisedMLP, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config import CostConfig, Scenario
-from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
+from uav_formation_env.config_io import (
+    load_scenario,
+    resolve_scenario,
+    save_scenario,
+    with_overrides,
+)
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation import run_episode_groups, summarise_groups
 from uav_formation_env.policies import DMPC_OPTIMIZERS, make_policy
@@ -51,9 +59,11 @@ from uav_formation_env.scenes import seeds_by_n_uav
 
 __all__ = [
     "ImitationConfig",
+    "best_round",
     "collect",
     "load_config",
     "sample_weights",
+    "select_round",
     "teacher_scenario",
     "train_imitation",
 ]
@@ -415,7 +425,7 @@ def train_imitation(
                 f"{row['validation_route_error_max_m']:.1f} m, {row['seconds']:.0f} s",
                 flush=True,
             )
-    best = max(rows, key=lambda row: (row["validation_completed"], -row["validation_cost"]))
+    best = best_round(rows)
     (out / "policy.pt").write_bytes(
         (out / "rounds" / str(best["round"]) / "policy.pt").read_bytes()
     )
@@ -442,6 +452,76 @@ def train_imitation(
     return record
 
 
+def best_round(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The row of the round with the most completed validation missions, then the lowest
+    realised cost (rows with ``validation_completed`` and ``validation_cost``)."""
+    return max(rows, key=lambda row: (row["validation_completed"], -row["validation_cost"]))
+
+
+def select_round(
+    out: str | Path, validation_seeds: int, validation_seed_start: int | None = None
+) -> dict[str, Any]:
+    """Choose a finished run's ``policy.pt`` again, on more validation seeds.
+
+    Eight validation episodes tell rounds apart by one mission at most (the paper students
+    complete 90-95 % of their missions), so the round that training kept is partly chance.
+    Every ``rounds/<r>/policy.pt`` of the run in ``out`` is flown on the seeds
+    ``validation_seed_start`` .. + ``validation_seeds`` - 1 (default start: the run's own,
+    5,000, apart from the evaluation seeds 0-99) and scored like training's validation
+    (:func:`best_round`); the rows go to ``selection.csv``, the chosen round is copied to
+    ``policy.pt`` and recorded under ``selection`` in ``config.yaml``.
+
+    Returns:
+        the chosen round's row (round, validation_completed, validation_cost, ...).
+    """
+    if isinstance(validation_seeds, bool) or not isinstance(validation_seeds, int):
+        raise ValueError(f"validation_seeds must be an integer >= 1, got {validation_seeds!r}")
+    if validation_seeds < 1:
+        raise ValueError(f"validation_seeds must be an integer >= 1, got {validation_seeds!r}")
+    out = Path(out)
+    record_path = out / "config.yaml"
+    if not record_path.is_file() or not (out / "rounds").is_dir():
+        raise FileNotFoundError(f"{out} is not a finished imitation run (config.yaml, rounds/)")
+    with open(record_path, encoding="utf-8") as stream:
+        record = yaml.safe_load(stream)
+    start = record["config"]["validation_seed_start"]
+    start = start if validation_seed_start is None else int(validation_seed_start)
+    scen = load_scenario(out / "scenario.yaml")
+    seeds = list(range(start, start + validation_seeds))
+    rows = []
+    for r in sorted(int(p.name) for p in (out / "rounds").iterdir() if p.name.isdigit()):
+        learner = make_policy(str(out / "rounds" / str(r) / "policy.pt"), scen)
+        summary = summarise_groups(run_episode_groups(scen, learner, seeds))
+        mission = summary["mission"]
+        rows.append(
+            {
+                "round": r,
+                "validation_completed": mission["completed"],
+                "validation_episodes": mission["episodes"],
+                "validation_cost": summary["realised_cost_mean"],
+                "validation_route_error_max_m": mission["route_error_max_m"],
+                "validation_collisions": mission["collisions_after_start"],
+            }
+        )
+    best = best_round(rows)
+    with open(out / "selection.csv", "w", newline="", encoding="utf-8") as stream:
+        writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    (out / "policy.pt").write_bytes(
+        (out / "rounds" / str(best["round"]) / "policy.pt").read_bytes()
+    )
+    record["best_round"] = best["round"]
+    record["selection"] = {
+        "validation_seed_start": start,
+        "validation_seeds": validation_seeds,
+        "round": best["round"],
+    }
+    with open(record_path, "w", encoding="utf-8") as stream:
+        yaml.safe_dump(record, stream, sort_keys=False)
+    return best
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scenario", default="paper", help="registered name or YAML path")
@@ -457,7 +537,27 @@ def main(argv: list[str] | None = None) -> int:
         help="configuration overrides, values parsed as YAML",
     )
     parser.add_argument("--quiet", action="store_true", help="no per-round lines")
+    parser.add_argument(
+        "--select",
+        type=int,
+        default=None,
+        metavar="SEEDS",
+        help="do not train: choose the finished run's policy.pt again on this many validation "
+        "seeds (select_round)",
+    )
     args = parser.parse_args(argv)
+    if args.select is not None:
+        try:
+            best = select_round(args.out, args.select)
+        except (ValueError, FileNotFoundError, KeyError) as error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+        print(
+            f"wrote {args.out}/policy.pt (round {best['round']}: "
+            f"{best['validation_completed']}/{best['validation_episodes']} validation missions, "
+            f"J {best['validation_cost']:.4g})"
+        )
+        return 0
     try:
         key = args.scenario if not str(args.scenario).endswith((".yaml", ".yml")) else "default"
         config = load_config(key, args.config, **parse_set(args.set))

@@ -3,15 +3,18 @@
 
 from __future__ import annotations
 
+import csv
 from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 torch = pytest.importorskip("torch")
 
 from uav_formation_baselines.imitation import (  # noqa: E402
     ImitationConfig,
+    best_round,
     collect,
     fit,
     load_config,
@@ -249,3 +252,47 @@ def test_results_fly_each_model_through_its_own_observation_layout(tmp_path: Pat
     save_scenario(SHORT, scenario)
     argv = [str(tmp_path / "run"), "--scenario", str(scenario), "--seeds", "1", "--compare"]
     assert results_main([*argv, "--out", str(tmp_path / "out")]) == 0  # 95 values, not 47
+
+
+def test_best_round_prefers_completed_missions_then_the_lower_cost() -> None:
+    rows = [
+        {"round": 0, "validation_completed": 3, "validation_cost": 1.0},
+        {"round": 1, "validation_completed": 4, "validation_cost": 9.0},
+        {"round": 2, "validation_completed": 4, "validation_cost": 5.0},
+    ]
+    assert best_round(rows)["round"] == 2
+    assert best_round(rows[:2])["round"] == 1  # one more mission outweighs any cost
+
+
+def test_select_round_chooses_again_on_more_validation_seeds(tmp_path: Path, capsys) -> None:
+    config = tiny_config(rounds=2, episodes=1, validation_seeds=1)
+    train_imitation("paper", tmp_path, config, progress=False)
+    (tmp_path / "policy.pt").write_bytes(b"stale")  # whatever training kept is replaced
+    assert main(["--out", str(tmp_path), "--select", "3"]) == 0
+    assert "validation missions" in capsys.readouterr().out
+    with open(tmp_path / "selection.csv", encoding="utf-8") as stream:
+        rows = list(csv.DictReader(stream))
+    assert [int(row["round"]) for row in rows] == [0, 1]
+    assert {int(row["validation_episodes"]) for row in rows} == {3}
+    scored = [
+        {
+            "round": int(r["round"]),
+            "validation_completed": int(r["validation_completed"]),
+            "validation_cost": float(r["validation_cost"]),
+        }
+        for r in rows
+    ]
+    chosen = best_round(scored)["round"]
+    kept = (tmp_path / "rounds" / str(chosen) / "policy.pt").read_bytes()
+    assert (tmp_path / "policy.pt").read_bytes() == kept
+    record = yaml.safe_load((tmp_path / "config.yaml").read_text())
+    assert record["best_round"] == chosen
+    assert record["selection"] == {
+        "validation_seed_start": 5000,
+        "validation_seeds": 3,
+        "round": chosen,
+    }
+    # a directory that is not a finished run: one line, nothing written
+    assert main(["--out", str(tmp_path / "none"), "--select", "3"]) == 2
+    assert capsys.readouterr().err.startswith("error: ")
+    assert not (tmp_path / "none").exists()
