@@ -401,19 +401,13 @@ def train_imitation(
         )
         path = save_policy(model, out / "rounds" / str(r) / "policy.pt", data_obs[:64])
         learner = make_policy(str(path), scen)
-        summary = summarise_groups(run_episode_groups(scen, learner, validation))
-        mission = summary["mission"]
         row = {
             "round": r,
             "samples": len(data_obs),
             "close_fraction": float(np.mean(np.concatenate(all_weights) > 1.0)),
             "loss": loss,
             "teacher_probability": config.beta**r if r else 1.0,
-            "validation_completed": mission["completed"],
-            "validation_episodes": mission["episodes"],
-            "validation_cost": summary["realised_cost_mean"],
-            "validation_route_error_max_m": mission["route_error_max_m"],
-            "validation_collisions": mission["collisions_after_start"],
+            **validation_scores(scen, learner, validation),
             "seconds": time.perf_counter() - started,
         }
         rows.append(row)
@@ -450,6 +444,21 @@ def train_imitation(
     with open(out / "config.yaml", "w", encoding="utf-8") as stream:
         yaml.safe_dump(record, stream, sort_keys=False)
     return record
+
+
+def validation_scores(scenario: Scenario, learner: Any, seeds: list[int]) -> dict[str, Any]:
+    """A round's validation: ``learner`` flies ``seeds`` (grouped by N) through the project's
+    runner; missions completed, episodes, realised J per UAV, route error max [m] and colliding
+    UAV-steps, as ``validation_*`` columns."""
+    summary = summarise_groups(run_episode_groups(scenario, learner, seeds))
+    mission = summary["mission"]
+    return {
+        "validation_completed": mission["completed"],
+        "validation_episodes": mission["episodes"],
+        "validation_cost": summary["realised_cost_mean"],
+        "validation_route_error_max_m": mission["route_error_max_m"],
+        "validation_collisions": mission["collisions_after_start"],
+    }
 
 
 def best_round(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -491,18 +500,7 @@ def select_round(
     rows = []
     for r in sorted(int(p.name) for p in (out / "rounds").iterdir() if p.name.isdigit()):
         learner = make_policy(str(out / "rounds" / str(r) / "policy.pt"), scen)
-        summary = summarise_groups(run_episode_groups(scen, learner, seeds))
-        mission = summary["mission"]
-        rows.append(
-            {
-                "round": r,
-                "validation_completed": mission["completed"],
-                "validation_episodes": mission["episodes"],
-                "validation_cost": summary["realised_cost_mean"],
-                "validation_route_error_max_m": mission["route_error_max_m"],
-                "validation_collisions": mission["collisions_after_start"],
-            }
-        )
+        rows.append({"round": r, **validation_scores(scen, learner, seeds)})
     best = best_round(rows)
     with open(out / "selection.csv", "w", newline="", encoding="utf-8") as stream:
         writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
