@@ -420,9 +420,7 @@ def train_imitation(
                 flush=True,
             )
     best = best_round(rows)
-    (out / "policy.pt").write_bytes(
-        (out / "rounds" / str(best["round"]) / "policy.pt").read_bytes()
-    )
+    keep_round(out, best["round"])
     with open(out / "rounds.csv", "w", newline="", encoding="utf-8") as stream:
         writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
         writer.writeheader()
@@ -461,6 +459,11 @@ def validation_scores(scenario: Scenario, learner: Any, seeds: list[int]) -> dic
     }
 
 
+def keep_round(out: Path, round_index: int) -> None:
+    """Make ``rounds/<round_index>/policy.pt`` the run's ``policy.pt``."""
+    (out / "policy.pt").write_bytes((out / "rounds" / str(round_index) / "policy.pt").read_bytes())
+
+
 def best_round(rows: list[dict[str, Any]]) -> dict[str, Any]:
     """The row of the round with the most completed validation missions, then the lowest
     realised cost (rows with ``validation_completed`` and ``validation_cost``)."""
@@ -483,9 +486,11 @@ def select_round(
     Returns:
         the chosen round's row (round, validation_completed, validation_cost, ...).
     """
-    if isinstance(validation_seeds, bool) or not isinstance(validation_seeds, int):
-        raise ValueError(f"validation_seeds must be an integer >= 1, got {validation_seeds!r}")
-    if validation_seeds < 1:
+    if (
+        isinstance(validation_seeds, bool)
+        or not isinstance(validation_seeds, int)
+        or validation_seeds < 1
+    ):
         raise ValueError(f"validation_seeds must be an integer >= 1, got {validation_seeds!r}")
     out = Path(out)
     record_path = out / "config.yaml"
@@ -506,9 +511,7 @@ def select_round(
         writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    (out / "policy.pt").write_bytes(
-        (out / "rounds" / str(best["round"]) / "policy.pt").read_bytes()
-    )
+    keep_round(out, best["round"])
     record["best_round"] = best["round"]
     record["selection"] = {
         "validation_seed_start": start,
@@ -544,31 +547,28 @@ def main(argv: list[str] | None = None) -> int:
         "seeds (select_round)",
     )
     args = parser.parse_args(argv)
-    if args.select is not None:
-        try:
-            best = select_round(args.out, args.select)
-        except (ValueError, FileNotFoundError, KeyError) as error:
-            print(f"error: {error}", file=sys.stderr)
-            return 2
-        print(
-            f"wrote {args.out}/policy.pt (round {best['round']}: "
-            f"{best['validation_completed']}/{best['validation_episodes']} validation missions, "
-            f"J {best['validation_cost']:.4g})"
-        )
-        return 0
     try:
-        key = args.scenario if not str(args.scenario).endswith((".yaml", ".yml")) else "default"
-        config = load_config(key, args.config, **parse_set(args.set))
-        record = train_imitation(
-            args.scenario, args.out, config, args.seed, args.threads, progress=not args.quiet
-        )
+        if args.select is not None:
+            best = select_round(args.out, args.select)
+            done = (
+                f"(round {best['round']}: {best['validation_completed']}/"
+                f"{best['validation_episodes']} validation missions, "
+                f"J {best['validation_cost']:.4g})"
+            )
+        else:
+            key = args.scenario if not str(args.scenario).endswith((".yaml", ".yml")) else "default"
+            config = load_config(key, args.config, **parse_set(args.set))
+            record = train_imitation(
+                args.scenario, args.out, config, args.seed, args.threads, progress=not args.quiet
+            )
+            done = (
+                f"(round {record['best_round']}), {record['agent_steps']} agent-steps in "
+                f"{record['wall_time_s']:.0f} s"
+            )
     except (ValueError, FileNotFoundError, KeyError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(
-        f"wrote {args.out}/policy.pt (round {record['best_round']}), "
-        f"{record['agent_steps']} agent-steps in {record['wall_time_s']:.0f} s"
-    )
+    print(f"wrote {args.out}/policy.pt {done}")
     return 0
 
 
