@@ -38,6 +38,7 @@ SUMMARY_KEYS = {
     "wall_time_per_step_s",
     "wall_time_per_step_per_episode_s",
     "seconds_per_episode",
+    "realised_cost_terms",
 }
 
 
@@ -118,6 +119,18 @@ def test_heuristic_from_observations_matches_the_law_on_simulator_arrays():
         worst = max(worst, float(np.abs(action * sim.u_max - direct).max()))
         result = sim.step(action * sim.u_max)
     assert worst < 1e-3  # float32 observations only
+
+
+def test_realised_cost_terms_add_up_to_j_and_energy_is_r_u_squared():
+    scenario = short(8.0)
+    batch = run_episodes(scenario, make_policy("heuristic", scenario), [0, 1])
+    summary = summarise(batch)
+    terms = summary["realised_cost_terms"]
+    assert set(terms) == {"formation", "energy", "terminal", "velocity", "separation", "obstacle"}
+    assert sum(terms.values()) == pytest.approx(summary["realised_cost_mean"], rel=1e-12)
+    # r Σ_k ||u_i(k)||² by hand from the recorded formation inputs, mean over seeds and UAVs
+    energy = scenario.cost.r * (batch.u_n**2).sum(axis=(0, 3)).mean()
+    assert terms["energy"] == pytest.approx(energy, rel=1e-12) and energy > 0
 
 
 def test_dmpc_records_give_trigger_counts_and_wall_time():

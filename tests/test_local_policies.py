@@ -147,6 +147,8 @@ def test_random_swarm_runs_grouped_by_drawn_n():
     assert summary["mission"]["episodes"] == len(seeds)
     per_seed = [c for b in batches for c in b.stage_cost.sum(axis=0).mean(axis=1)]
     np.testing.assert_allclose(summary["realised_cost_per_seed"], per_seed)
+    terms = summary["realised_cost_terms"]
+    assert sum(terms.values()) == pytest.approx(summary["realised_cost_mean"], rel=1e-12)
     assert set(summary["groups"]) == {str(n) for n in drawn.values()}
     n_steps = batches[0].n_steps
     policy_seconds = sum(b.policy_seconds.sum() for b in batches)

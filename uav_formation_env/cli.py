@@ -134,6 +134,7 @@ def _mission_lines(summary: dict) -> list[str]:
         "route met, no collision after t = 0)",
         f"realised J per UAV: {summary['realised_cost_mean']:.4g} "
         f"± {summary['realised_cost_ci95']:.2g} (95% CI over seeds)",
+        "by term: " + ", ".join(f"{k} {v:.3g}" for k, v in summary["realised_cost_terms"].items()),
         f"route error: RMS {m['route_error_rms_m']:.1f} ± {m['route_error_rms_m_ci95']:.1f} m, "
         f"max {m['route_error_max_m']:.1f} ± {m['route_error_max_m_ci95']:.1f} m; velocity "
         f"RMSE {m['velocity_rmse_mps']:.2f} m/s",

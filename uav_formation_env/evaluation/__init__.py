@@ -40,6 +40,9 @@ Metrics (:func:`summarise`), each per seed and then mean over seeds unless state
   separation after t = 0, completion rate and every failure with its seed and cause), always
   beside the cost: J_i tracks velocity, not position, so a cheap policy can leave the route;
 - ``realised_cost_ci95``: half-width of the 95 % confidence interval of the mean over seeds;
+- ``realised_cost_terms``: the realised J per UAV split into J_i's terms (formation, energy,
+  terminal, velocity, separation, obstacle), which add up to ``realised_cost_mean``: where a
+  policy's cost goes (``uav-formation evaluate`` prints them as "by term");
 - ``wall_time_per_step_s``: wall time of one batched control step (policy + simulation), and the
   same divided by the number of seeds.
 """

@@ -88,6 +88,13 @@ def _none_for_nan(x: np.ndarray) -> list[float | None]:
     return [None if np.isnan(v) else round(float(v), 6) for v in x]
 
 
+def cost_terms_per_seed(batch: EpisodeBatch) -> dict[str, np.ndarray]:
+    """Each term of J_i (formation, energy, terminal, velocity, separation, obstacle) realised
+    over the episode, averaged over the UAVs: name -> (B,) per seed [-]. The terms add up to
+    ``stage_cost`` (``J_i = sum of its terms``), so they say where a policy's realised J goes."""
+    return {name: value.sum(axis=0).mean(axis=1) for name, value in batch.cost_terms.items()}
+
+
 def mission_of(batch: EpisodeBatch) -> MissionMetrics:
     """The mission metrics (:mod:`~uav_formation_env.evaluation.mission`) of an episode batch."""
     return mission_metrics(
@@ -119,6 +126,9 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
         "realised_cost_mean": float(realised.mean()),
         "realised_cost_ci95": cost_ci95,
         "realised_cost_per_seed": realised.mean(axis=1).tolist(),
+        "realised_cost_terms": {
+            name: float(per_seed.mean()) for name, per_seed in cost_terms_per_seed(batch).items()
+        },
         "mission": mission_summary(mission_of(batch), list(batch.seeds)),
         "formation_rmse_m": float(rmse.mean()),
         "formation_rmse_m_per_seed": rmse.tolist(),
@@ -175,6 +185,7 @@ def summarise_groups(batches: list[EpisodeBatch]) -> dict[str, Any]:
         else [float(np.mean(row)) for t in triggers for row in t]
     )
     seconds = sum(batch.wall_seconds for batch in batches)
+    terms = [cost_terms_per_seed(batch) for batch in batches]
 
     def joined(key: str) -> list[Any]:
         return [value for p in parts for value in p[key]]
@@ -192,6 +203,9 @@ def summarise_groups(batches: list[EpisodeBatch]) -> dict[str, Any]:
         "realised_cost_mean": mean,
         "realised_cost_ci95": cost_ci95,
         "realised_cost_per_seed": realised.tolist(),
+        "realised_cost_terms": {
+            name: float(np.concatenate([t[name] for t in terms]).mean()) for name in terms[0]
+        },
         "mission": mission_summary(
             concatenate_missions([mission_of(batch) for batch in batches]), seeds
         ),
