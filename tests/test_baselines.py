@@ -42,7 +42,12 @@ from uav_formation_baselines.wrappers import (  # noqa: E402
     make_training_env,
     training_scenario,
 )
-from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides  # noqa: E402
+from uav_formation_env.config_io import (  # noqa: E402
+    load_scenario,
+    resolve_scenario,
+    save_scenario,
+    with_overrides,
+)
 from uav_formation_env.envs.vector import FormationVecEnv  # noqa: E402
 from uav_formation_env.episode import observations_of  # noqa: E402
 from uav_formation_env.evaluation import (  # noqa: E402
@@ -368,3 +373,12 @@ def test_comparison_outputs_agree_with_summarise(small_comparison):
         assert mission["completed"] == episodes - len(failed)
         for seed in failed:  # every failed seed is listed with its causes
             assert f"seed {seed}: {'; '.join(mission['failures'][seed])}" in markdown
+
+
+def test_random_fields_local_yaml_is_random_fields_with_the_local_observation():
+    # the scene file the RL baselines train on for the distributions (baselines/RESULTS.md,
+    # "Generalisation"): the registered random_fields with only the observation layout changed
+    path = Path(__file__).parents[1] / "baselines" / "scenarios" / "random_fields_local.yaml"
+    expected = with_overrides(resolve_scenario("random_fields"), {"observation": {"kind": "local"}})
+    assert load_scenario(path) == expected
+    assert load_scenario(path) != resolve_scenario("random_fields")
