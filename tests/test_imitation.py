@@ -228,9 +228,17 @@ def test_cli_evaluate_flies_a_model_on_its_own_scenario(tmp_path: Path, capsys) 
     argv = ["evaluate", "--policy", str(tmp_path / "run"), "--seeds", "2", "--quiet"]
     assert cli_main([*argv, "--out", str(out)]) == 0
     assert "2 s episodes" in capsys.readouterr().out  # the run's scenario.yaml, not the paper's
-    # the paper's own scenario (full layout, 47 values) cannot feed the 95-value local model
-    assert cli_main([*argv, "--scenario", "paper", "--out", str(out)]) != 0
-    assert "95" in capsys.readouterr().err
+    # another scenario (the paper's, full layout of 47 values) is flown through the model's own
+    # 95-value local layout, as uav_formation_baselines.results does
+    paper = [*argv, "--scenario", "paper", "--duration", "2", "--out", str(out)]
+    assert cli_main(paper) == 0
+    assert "local observation" in capsys.readouterr().out
+    # a full-layout model (its size depends on N) cannot fly another N: one error line
+    config = tiny_config(rounds=1, episodes=1)
+    train_imitation("paper", tmp_path / "full", config, progress=False)
+    other_n = ["evaluate", "--policy", str(tmp_path / "full"), "--scenario", "n3", "--quiet"]
+    assert cli_main([*other_n, "--seeds", "1", "--duration", "2", "--out", str(out)]) != 0
+    assert "47" in capsys.readouterr().err
 
 
 def test_start_episodes_add_short_episodes_of_their_own_seeds(tmp_path: Path) -> None:

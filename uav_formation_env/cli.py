@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -89,10 +90,14 @@ def _model_scenario(policy: str) -> str | Path:
 
 
 def _scenario_for(args: argparse.Namespace):
-    name = args.scenario
-    if name is None:  # evaluate / render: a model's own scenario, else the paper's
-        name = _model_scenario(getattr(args, "policy", ""))
-    scenario = resolve_scenario(name)
+    model = _model_scenario(getattr(args, "policy", ""))
+    # evaluate / render without --scenario: a model's own scenario, else the paper's
+    scenario = resolve_scenario(model if args.scenario is None else args.scenario)
+    if args.scenario is not None and isinstance(model, Path):
+        # a saved model senses through the observation layout it was trained with, whatever
+        # scene it flies (as uav_formation_baselines.results does): a local-layout student of
+        # random_swarm flies random_fields, whose own layout is the full one
+        scenario = replace(scenario, observation=resolve_scenario(model).observation)
     overrides = {}
     if getattr(args, "observer", None) is not None:
         overrides["observer.enabled"] = args.observer == "on"
@@ -226,8 +231,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     )
     observer = "on" if scenario.observer.enabled else "off"
     print(
-        f"{args.policy} on {scenario.name!r} (observer {observer}), seeds "
-        f"{seeds[0]}..{seeds[-1]}, {scenario.duration:g} s episodes"
+        f"{args.policy} on {scenario.name!r} (observer {observer}, {scenario.observation.kind} "
+        f"observation), seeds {seeds[0]}..{seeds[-1]}, {scenario.duration:g} s episodes"
     )
     for line in _mission_lines(summary):
         print(f"  {line}")
@@ -354,7 +359,8 @@ SCENARIO_HELP = f"registered name ({', '.join(SCENARIOS)}) or path of a YAML sce
 
 
 MODEL_SCENARIO_HELP = (
-    f"{SCENARIO_HELP}; None: the scenario.yaml of a saved model's run directory, else paper"
+    f"{SCENARIO_HELP}; None: the scenario.yaml of a saved model's run directory, else paper "
+    "(a saved model flies any scenario through its own observation layout)"
 )
 
 
