@@ -148,19 +148,41 @@ def mission_bars(
     return _save(fig, png)
 
 
+# The learning-curve sources of each recipe's run directory: (file, x column, y column).
+# Left panel, deterministic evaluation during training (realised J per UAV over agent-steps):
+# DAgger's validation after each round and SB3's FormationEvalCallback. Right panel: BenchMARL's
+# training reward per UAV-step over frames.
+EVALUATION_CURVES = (
+    ("rounds.csv", "samples", "validation_cost"),
+    ("evaluations.csv", "timesteps", "realised_cost_mean"),
+)
+TRAINING_CURVES = (("progress.csv", "frames", "mean_reward_per_uav_step"),)
+
+
+def run_curves(run: str | Path) -> dict[str, list[tuple[list[float], list[float]]]]:
+    """The ``(x, y)`` curves a run directory holds: ``"evaluation"`` (:data:`EVALUATION_CURVES`)
+    and ``"training"`` (:data:`TRAINING_CURVES`); files a recipe does not write are skipped."""
+    run = Path(run)
+    return {
+        panel: [curve for curve in (_column(run / f, x, y) for f, x, y in sources) if curve[0]]
+        for panel, sources in (("evaluation", EVALUATION_CURVES), ("training", TRAINING_CURVES))
+    }
+
+
 def training_curves(
     run_dirs: Sequence[str | Path],
     png: str | Path,
     reference_cost: float | None = None,
 ) -> Path:
-    """Learning curves of the DAgger and BenchMARL recipes, one line per run, coloured by the
-    algorithm of its ``config.yaml``.
+    """Learning curves of the DAgger, SB3 and BenchMARL recipes (:func:`run_curves`), one line
+    per run, coloured by the algorithm of its ``config.yaml``.
 
-    Left: DAgger's validation realised J per UAV after each round (``rounds.csv``: deterministic
-    policy, full episodes, the validation seeds) over the labelled agent-steps so far, with
-    ``reference_cost`` (LFPIO's realised J on the evaluation seeds) as a dashed line. Right:
-    BenchMARL's training reward per UAV-step (``progress.csv``: the transformed reward the
-    algorithm optimises, stochastic policy) over frames.
+    Left: the deterministic evaluation during training, realised J per UAV over agent-steps
+    (DAgger's validation after each round over the labelled agent-steps so far; SB3's periodic
+    evaluation over its timesteps), with ``reference_cost`` (LFPIO's realised J on the
+    evaluation seeds) as a dashed line. Right: BenchMARL's training reward per UAV-step
+    (``progress.csv``: the transformed reward the algorithm optimises, stochastic policy) over
+    frames.
     """
     import yaml
 
@@ -171,18 +193,17 @@ def training_curves(
         algorithm = str(config.get("algorithm") or config.get("algo"))
         label = None if algorithm in colours else algorithm  # one legend entry per algorithm
         colour = colours.setdefault(algorithm, f"C{len(colours)}")
-        xs, ys = _column(run / "rounds.csv", "samples", "validation_cost")
-        if xs:
+        curves = run_curves(run)
+        for xs, ys in curves["evaluation"]:
             left.plot(xs, ys, "o-", color=colour, label=label)
-        xs, ys = _column(run / "progress.csv", "frames", "mean_reward_per_uav_step")
-        if xs:
+        for xs, ys in curves["training"]:
             right.plot(xs, ys, "-", color=colour, label=label)
     if reference_cost is not None:
         left.axhline(reference_cost, color="k", ls="--", label="LFPIO (evaluation seeds)")
     left.set_yscale("log")
-    left.set_xlabel("labelled agent-steps")
-    left.set_ylabel("validation realised J per UAV")
-    left.set_title("DAgger from the reference")
+    left.set_xlabel("agent-steps (DAgger: labelled)")
+    left.set_ylabel("evaluation realised J per UAV")
+    left.set_title("Evaluation during training (DAgger, SB3)")
     right.set_xlabel("frames (env steps)")
     right.set_ylabel("training reward per UAV-step (transformed)")
     right.set_title("BenchMARL")

@@ -382,3 +382,20 @@ def test_random_fields_local_yaml_is_random_fields_with_the_local_observation():
     expected = with_overrides(resolve_scenario("random_fields"), {"observation": {"kind": "local"}})
     assert load_scenario(path) == expected
     assert load_scenario(path) != resolve_scenario("random_fields")
+
+
+def test_learning_curves_take_sb3_evaluations_beside_dagger_rounds(tmp_path):
+    from uav_formation_baselines.plots import run_curves, training_curves
+
+    sb3, dagger = tmp_path / "ppo_s0", tmp_path / "dagger_s0"
+    for run, algo in ((sb3, "algo: ppo"), (dagger, "algorithm: dagger")):
+        run.mkdir()
+        (run / "config.yaml").write_text(algo + "\n")
+    (sb3 / "evaluations.csv").write_text(
+        "timesteps,realised_cost_mean,collisions\n100000,2.5e6,0\n200000,1.5e6,3\n"
+    )
+    (dagger / "rounds.csv").write_text("round,samples,validation_cost\n0,1000,9e5\n")
+    assert run_curves(sb3) == {"evaluation": [([1e5, 2e5], [2.5e6, 1.5e6])], "training": []}
+    assert run_curves(dagger) == {"evaluation": [([1000.0], [9e5])], "training": []}
+    png = training_curves([sb3, dagger], tmp_path / "curves.png", reference_cost=1e6)
+    assert png.stat().st_size > 1000
