@@ -90,7 +90,8 @@ def _model_scenario(policy: str) -> str | Path:
 
 
 def _scenario_for(args: argparse.Namespace):
-    model = _model_scenario(getattr(args, "policy", ""))
+    policy = getattr(args, "policy", None)
+    model = _model_scenario(policy) if policy else "paper"  # "" would name the current directory
     # evaluate / render without --scenario: a model's own scenario, else the paper's
     scenario = resolve_scenario(model if args.scenario is None else args.scenario)
     if args.scenario is not None and isinstance(model, Path):
