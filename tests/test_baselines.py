@@ -376,8 +376,8 @@ def test_comparison_outputs_agree_with_summarise(small_comparison):
 
 
 def test_random_fields_local_yaml_is_random_fields_with_the_local_observation():
-    # the scene file the RL baselines train on for the distributions (baselines/RESULTS.md,
-    # "Generalisation"): the registered random_fields with only the observation layout changed
+    # the scene file the RL baselines train on (baselines/RESULTS.md, "Reinforcement learning on
+    # the scene distributions"): the registered random_fields with only the observation changed
     path = Path(__file__).parents[1] / "baselines" / "scenarios" / "random_fields_local.yaml"
     expected = with_overrides(resolve_scenario("random_fields"), {"observation": {"kind": "local"}})
     assert load_scenario(path) == expected
