@@ -1,7 +1,7 @@
 """Behaviour cloning with DAgger from the reference policy: a shared MLP that flies the mission.
 
     python -m uav_formation_baselines.imitation --scenario paper --out runs/bc_paper \
-        [--seed 0] [--set rounds=6 episodes=16 ...]
+        [--seed 0] [--workers 4] [--device auto] [--set rounds=6 episodes=16 ...]
     python -m uav_formation_baselines.imitation --out runs/bc_paper --select 40
 
 The teacher is a reference DMPC of the registry (``exact`` best response by default: the cheapest
@@ -23,7 +23,10 @@ and the learner must then use the N-independent observation (``observation.kind:
 
 The output directory holds ``policy.pt`` (load with ``uav-formation evaluate --policy DIR``),
 ``config.yaml`` (the resolved configuration, scenario name, seed, wall time), ``scenario.yaml``,
-``rounds.csv`` (per round: samples, loss, validation completion and cost) and ``rounds/``.
+``rounds.csv`` (per round, written as each ends: samples, loss, validation completion and cost)
+and ``rounds/``. ``--workers`` processes fly each round's episodes
+(:mod:`~uav_formation_baselines.imitation_data`: the same data whatever their number) and the MLP
+is fitted on the GPU when torch sees one (``--device``).
 ``--select SEEDS`` chooses a finished run's ``policy.pt`` again on more validation seeds
 (:func:`select_round`).
 """
@@ -42,6 +45,7 @@ import yaml
 
 from uav_formation_baselines import HYPERPARAMS_DIR
 from uav_formation_baselines.config import parse_set
+from uav_formation_baselines.imitation_data import collect, collect_in_workers, worker_pool
 from uav_formation_baselines.torch_policy import ACTIVATIONS, NormalisedMLP, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config import CostConfig, Scenario
@@ -51,17 +55,15 @@ from uav_formation_env.config_io import (
     save_scenario,
     with_overrides,
 )
-from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation import run_episode_groups, summarise_groups
 from uav_formation_env.policies import DMPC_OPTIMIZERS, make_policy
-from uav_formation_env.policies.dmpc import NashDMPCPolicy
-from uav_formation_env.scenes import seeds_by_n_uav
 
 __all__ = [
     "ImitationConfig",
     "best_round",
     "collect",
     "load_config",
+    "resolve_device",
     "sample_weights",
     "select_round",
     "teacher_scenario",
@@ -207,67 +209,6 @@ def load_config(scenario_key: str, path: str | Path | None = None, **patch: Any)
     return ImitationConfig.from_mapping(values, where=str(path))
 
 
-def collect(
-    scenario: Scenario,
-    teacher_name: str,
-    seeds: list[int],
-    teacher_threshold: float = 0.0,
-    learner: Any | None = None,
-    teacher_probability: float = 1.0,
-    mix_seed: int = 0,
-    n_steps: int | None = None,
-    teacher_scenario: Scenario | None = None,
-) -> tuple[np.ndarray, ...]:
-    """Fly one episode per seed and label every UAV-step with the teacher's action.
-
-    Args:
-        scenario: the scenario (any N; groups of equal N fly as one batch each).
-        teacher_name: the reference DMPC solver that labels.
-        teacher_threshold: its event-trigger threshold [-].
-        seeds: episode seeds.
-        learner: a policy with ``act_batch(obs)``, or None (the teacher flies alone).
-        teacher_probability: chance that a copy executes the teacher's action at a step (the
-            learner's otherwise).
-        mix_seed: seed of the coin flips.
-        n_steps: control steps flown per episode (None: the whole episode).
-        teacher_scenario: the scenario the teacher plans with (None: ``scenario``); it must
-            observe as ``scenario`` does (e.g. its J_i alone differs).
-
-    Returns:
-        ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m], clearance (M,) [m])``
-        over every copy, UAV and step; ``nearest`` is the distance from the UAV to its nearest
-        other UAV, ``clearance`` to the nearest obstacle surface (inf without obstacles).
-    """
-    coins = np.random.default_rng(mix_seed)
-    observations, labels, nearest, clearance = [], [], [], []
-    for n_uav, group in seeds_by_n_uav(scenario, seeds).items():
-        episodes = FormationEpisodes(scenario, len(group), fly_on_after_collision=True, n_uav=n_uav)
-        teacher = NashDMPCPolicy(
-            scenario if teacher_scenario is None else teacher_scenario,
-            teacher_name,
-            threshold=teacher_threshold,
-        )
-        teacher.reset(len(group), seeds=group)
-        step = episodes.reset(seed=group)
-        links = getattr(teacher, "needs_neighbour_index", False)
-        for _ in range(scenario.n_steps if n_steps is None else min(n_steps, scenario.n_steps)):
-            obs = step.observation
-            label = (
-                teacher.act_batch(obs, step.neighbour_index) if links else teacher.act_batch(obs)
-            )
-            observations.append(obs.reshape(-1, obs.shape[-1]))
-            labels.append(np.asarray(label, dtype=np.float32).reshape(-1, 3))
-            nearest.append(np.asarray(step.result.min_separation, dtype=float).reshape(-1))
-            clearance.append(np.asarray(step.result.obstacle_distance, dtype=float).reshape(-1))
-            action = label
-            if learner is not None and teacher_probability < 1.0:
-                own = np.asarray(learner.act_batch(obs), dtype=float)
-                use_teacher = coins.random(len(group)) < teacher_probability
-                action = np.where(use_teacher[:, None, None], label, own)
-            step = episodes.step(action)
-    return tuple(np.concatenate(part) for part in (observations, labels, nearest, clearance))
-
-
 def teacher_scenario(scenario: Scenario, config: ImitationConfig) -> Scenario:
     """The scenario the teacher plans with: ``scenario`` with ``config.teacher_cost`` over its
     cost (an unknown cost field is a ``ValueError`` naming it)."""
@@ -293,29 +234,33 @@ def fit(
     config: ImitationConfig,
     seed: int,
     weights: np.ndarray | None = None,
+    device: str = "cpu",
 ) -> float:
     """``config.epochs`` passes of Adam on the (weighted) mean squared error of the mean action
     against the teacher's; ``weights`` (M,) per sample (None: 1); returns the last epoch's mean
-    weighted loss."""
+    weighted loss. The model is fitted on ``device`` and left on the CPU (the batches' order
+    comes from a CPU generator, so it is the same on every device)."""
     import torch
 
     generator = torch.Generator().manual_seed(seed)
-    inputs, targets = torch.as_tensor(obs), torch.as_tensor(actions)
+    inputs = torch.as_tensor(obs, device=device)
+    targets = torch.as_tensor(actions, device=device)
     sample_weight = (
-        torch.ones(len(inputs))
+        torch.ones(len(inputs), device=device)
         if weights is None
-        else torch.as_tensor(np.asarray(weights, dtype=np.float32))
+        else torch.as_tensor(np.asarray(weights, dtype=np.float32), device=device)
     )
+    model.to(device)
     optimiser = torch.optim.Adam(model.net.parameters(), lr=config.learning_rate)
     # cosine decay to 0 over the round: the last weights are not a noisy SGD iterate, which
     # matters in closed loop (without it, validation completion jumped between rounds)
     batches = config.epochs * -(-len(inputs) // config.batch_size)
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=batches)
     model.train()
-    loss_sum = 0.0
     for _ in range(config.epochs):
-        order = torch.randperm(len(inputs), generator=generator)
-        loss_sum, count = 0.0, 0
+        order = torch.randperm(len(inputs), generator=generator).to(device)
+        # summed on the device: reading each batch's loss back would wait for the GPU every step
+        loss_sum = torch.zeros((), dtype=torch.float64, device=device)
         for start in range(0, len(order), config.batch_size):
             index = order[start : start + config.batch_size]
             error = ((model.mean_action(inputs[index]) - targets[index]) ** 2).mean(dim=-1)
@@ -325,11 +270,10 @@ def fit(
             loss.backward()
             optimiser.step()
             schedule.step()
-            loss_sum += float(loss.detach()) * len(index)
-            count += len(index)
-        loss_sum /= count
+            loss_sum += loss.detach().double() * len(index)
+    model.to("cpu")
     model.eval()
-    return loss_sum
+    return float(loss_sum) / len(inputs)
 
 
 def train_imitation(
@@ -339,8 +283,49 @@ def train_imitation(
     seed: int = 0,
     threads: int = 1,
     progress: bool = True,
+    workers: int = 1,
+    device: str = "auto",
 ) -> dict[str, Any]:
-    """DAgger (see the module docstring); writes ``out`` and returns the run's record."""
+    """DAgger (see the module docstring); writes ``out`` and returns the run's record.
+
+    ``threads``: torch CPU threads of this process; ``workers``: processes that fly and label
+    each round's episodes (:func:`~uav_formation_baselines.imitation_data.collect_in_workers`:
+    the same data whatever the number); ``device``: where the MLP is fitted (``auto``: CUDA when
+    present, else the CPU)."""
+    fit_device = resolve_device(device)
+    pool = worker_pool(workers)  # checks ``workers`` before anything is written
+    try:
+        return _train(scenario, out, config, seed, threads, progress, workers, pool, fit_device)
+    finally:
+        if pool is not None:
+            pool.shutdown()
+
+
+def resolve_device(device: str) -> str:
+    """``auto`` -> ``cuda`` when torch sees a GPU, else ``cpu``; ``cpu`` and ``cuda[:k]`` as given
+    (``cuda`` without a GPU is a ``ValueError``)."""
+    import torch
+
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if device == "cpu" or str(device).startswith("cuda"):
+        if str(device).startswith("cuda") and not torch.cuda.is_available():
+            raise ValueError(f"device {device!r} asked for, but torch sees no CUDA device")
+        return str(device)
+    raise ValueError(f"device must be 'auto', 'cpu' or 'cuda[:k]', got {device!r}")
+
+
+def _train(
+    scenario: str | Path | Scenario,
+    out: str | Path,
+    config: ImitationConfig,
+    seed: int,
+    threads: int,
+    progress: bool,
+    workers: int,
+    pool: Any,
+    fit_device: str,
+) -> dict[str, Any]:
     import torch
 
     torch.set_num_threads(int(threads))
@@ -362,7 +347,7 @@ def train_imitation(
     all_actions: list[np.ndarray] = []
     all_weights: list[np.ndarray] = []
     model: NormalisedMLP | None = None
-    learner = None
+    learner_path: str | None = None  # the last round's export: workers load it by path
     rows: list[dict[str, Any]] = []
     start_steps = max(1, round(config.start_duration / scen.dynamics.dt))
     for r in range(config.rounds):
@@ -373,13 +358,15 @@ def train_imitation(
                 (start_steps, base + 50_000 + r * config.start_episodes, config.start_episodes)
             )
         for part, (steps, first, count) in enumerate(parts):
-            obs, actions, nearest, clearance = collect(
-                scen,
-                config.teacher,
+            obs, actions, nearest, clearance = collect_in_workers(
+                pool,
+                workers,
                 list(range(first, first + count)),
-                config.teacher_threshold,
-                learner,
-                config.beta**r if r else 1.0,
+                scenario=scen,
+                teacher_name=config.teacher,
+                teacher_threshold=config.teacher_threshold,
+                learner=learner_path,
+                teacher_probability=config.beta**r if r else 1.0,
                 mix_seed=seed * 1000 + 10 * r + part,
                 n_steps=steps,
                 teacher_scenario=teacher_scen,
@@ -397,10 +384,17 @@ def train_imitation(
                 masked_slots=config.masked_slots,
             )
         loss = fit(
-            model, data_obs, data_actions, config, seed * 1000 + r, np.concatenate(all_weights)
+            model,
+            data_obs,
+            data_actions,
+            config,
+            seed * 1000 + r,
+            np.concatenate(all_weights),
+            device=fit_device,
         )
         path = save_policy(model, out / "rounds" / str(r) / "policy.pt", data_obs[:64])
-        learner = make_policy(str(path), scen)
+        learner_path = str(path)
+        learner = make_policy(learner_path, scen)
         row = {
             "round": r,
             "samples": len(data_obs),
@@ -411,6 +405,7 @@ def train_imitation(
             "seconds": time.perf_counter() - started,
         }
         rows.append(row)
+        write_rows(out / "rounds.csv", rows)  # each round: a stopped run keeps its table
         if progress:
             print(
                 f"round {r}: {row['samples']} samples, loss {loss:.4g}, validation "
@@ -421,10 +416,6 @@ def train_imitation(
             )
     best = best_round(rows)
     keep_round(out, best["round"])
-    with open(out / "rounds.csv", "w", newline="", encoding="utf-8") as stream:
-        writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
     record = {
         "algorithm": "dagger",
         "scenario": scen.name,
@@ -438,6 +429,8 @@ def train_imitation(
         "agent_steps": int(sum(len(o) for o in all_obs)),
         "wall_time_s": time.perf_counter() - started,
         "torch_threads": int(threads),
+        "workers": int(workers),
+        "fit_device": fit_device,
     }
     with open(out / "config.yaml", "w", encoding="utf-8") as stream:
         yaml.safe_dump(record, stream, sort_keys=False)
@@ -457,6 +450,14 @@ def validation_scores(scenario: Scenario, learner: Any, seeds: list[int]) -> dic
         "validation_route_error_max_m": mission["route_error_max_m"],
         "validation_collisions": mission["collisions_after_start"],
     }
+
+
+def write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
+    """``rows`` (dicts with the same keys) as a CSV table at ``path``."""
+    with open(path, "w", newline="", encoding="utf-8") as stream:
+        writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
 
 
 def keep_round(out: Path, round_index: int) -> None:
@@ -507,10 +508,7 @@ def select_round(
         learner = make_policy(str(out / "rounds" / str(r) / "policy.pt"), scen)
         rows.append({"round": r, **validation_scores(scen, learner, seeds)})
     best = best_round(rows)
-    with open(out / "selection.csv", "w", newline="", encoding="utf-8") as stream:
-        writer = csv.DictWriter(stream, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_rows(out / "selection.csv", rows)
     keep_round(out, best["round"])
     record["best_round"] = best["round"]
     record["selection"] = {
@@ -529,6 +527,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--seed", type=int, default=0, help="run seed (network, seeds, coins)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
+    parser.add_argument(
+        "--workers", type=int, default=1, help="processes flying each round's episodes"
+    )
+    parser.add_argument(
+        "--device",
+        default="auto",
+        help="where the MLP is fitted: auto (CUDA if present), cpu, cuda",
+    )
     parser.add_argument("--config", default=None, help="YAML (default: hyperparams/bc.yml)")
     parser.add_argument(
         "--set",
@@ -559,7 +565,14 @@ def main(argv: list[str] | None = None) -> int:
             key = args.scenario if not str(args.scenario).endswith((".yaml", ".yml")) else "default"
             config = load_config(key, args.config, **parse_set(args.set))
             record = train_imitation(
-                args.scenario, args.out, config, args.seed, args.threads, progress=not args.quiet
+                args.scenario,
+                args.out,
+                config,
+                args.seed,
+                args.threads,
+                progress=not args.quiet,
+                workers=args.workers,
+                device=args.device,
             )
             done = (
                 f"(round {record['best_round']}), {record['agent_steps']} agent-steps in "

@@ -19,9 +19,14 @@ from uav_formation_baselines.imitation import (  # noqa: E402
     fit,
     load_config,
     main,
+    resolve_device,
     sample_weights,
     teacher_scenario,
     train_imitation,
+)
+from uav_formation_baselines.imitation_data import (  # noqa: E402
+    collect_in_workers,
+    worker_pool,
 )
 from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
 from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
@@ -69,13 +74,13 @@ def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
     teacher = NashDMPCPolicy(SHORT, "exact", threshold=0.0)
     teacher.reset(2, seeds=[3, 4])
     step = episodes.reset(seed=[3, 4])
-    for k in range(10):
+    by_episode = [a.reshape(2, 10, 5, *a.shape[1:]) for a in (obs, labels, nearest, clearance)]
+    for k in range(10):  # samples come episode by episode, then step, then UAV
         action = teacher.act_batch(step.observation)
-        rows = slice(k * 10, (k + 1) * 10)
-        np.testing.assert_array_equal(obs[rows], step.observation.reshape(10, 47))
-        np.testing.assert_allclose(labels[rows], action.reshape(10, 3), atol=1e-6)
-        np.testing.assert_array_equal(nearest[rows], step.result.min_separation.reshape(10))
-        np.testing.assert_array_equal(clearance[rows], step.result.obstacle_distance.reshape(10))
+        np.testing.assert_array_equal(by_episode[0][:, k], step.observation)
+        np.testing.assert_allclose(by_episode[1][:, k], action, atol=1e-6)
+        np.testing.assert_array_equal(by_episode[2][:, k], step.result.min_separation)
+        np.testing.assert_array_equal(by_episode[3][:, k], step.result.obstacle_distance)
         step = episodes.step(action)
 
 
@@ -304,3 +309,49 @@ def test_select_round_chooses_again_on_more_validation_seeds(tmp_path: Path, cap
     assert main(["--out", str(tmp_path / "none"), "--select", "3"]) == 2
     assert capsys.readouterr().err.startswith("error: ")
     assert not (tmp_path / "none").exists()
+
+
+def test_an_episode_is_named_by_its_seed_whatever_the_batch_or_the_workers(tmp_path: Path) -> None:
+    model = NormalisedMLP(np.zeros(47), np.ones(47), (8,), "tanh")
+    learner = str(save_policy(model, tmp_path / "learner.pt", np.zeros((4, 47), np.float32)))
+    settings = {
+        "scenario": SHORT,
+        "teacher_name": "exact",
+        "learner": learner,
+        "teacher_probability": 0.5,  # each episode mixes teacher and learner by its own coins
+        "mix_seed": 7,
+    }
+    together = collect(seeds=[3, 4, 5], **settings)
+    alone = collect(seeds=[4], **settings)
+    # seed 4's rows are the second 10 steps x 5 UAVs; equal up to the float32 rounding of the
+    # learner's batched matrix products, which depends on the batch size
+    for whole, single in zip(together, alone):
+        np.testing.assert_allclose(whole[50:100], single, rtol=1e-5, atol=1e-6)
+    pool = worker_pool(2)
+    try:
+        split = collect_in_workers(pool, 2, [3, 4, 5], **settings)
+    finally:
+        pool.shutdown()
+    for whole, parts in zip(together, split):
+        np.testing.assert_allclose(whole, parts, rtol=1e-5, atol=1e-6)
+    # the coins were really flipped: the learner and the teacher both flew some steps
+    assert not np.array_equal(
+        together[0], collect(seeds=[3, 4, 5], **{**settings, "mix_seed": 8})[0]
+    )
+    with pytest.raises(ValueError, match="workers must be an integer >= 1, got 0"):
+        worker_pool(0)
+
+
+def test_fit_device_is_checked_and_the_cli_reports_bad_workers(tmp_path: Path, capsys) -> None:
+    assert resolve_device("cpu") == "cpu"
+    assert resolve_device("auto") == ("cuda" if torch.cuda.is_available() else "cpu")
+    with pytest.raises(ValueError, match="device must be 'auto', 'cpu' or 'cuda"):
+        resolve_device("tpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="torch sees no CUDA device"):
+            resolve_device("cuda")
+    assert main(["--out", str(tmp_path / "run"), "--workers", "0"]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "error: workers must be an integer >= 1, got 0"
+    ]
+    assert not (tmp_path / "run").exists()  # nothing written before the settings were checked
