@@ -45,7 +45,12 @@ import yaml
 
 from uav_formation_baselines import HYPERPARAMS_DIR
 from uav_formation_baselines.config import parse_set
-from uav_formation_baselines.imitation_data import collect, collect_in_workers, worker_pool
+from uav_formation_baselines.imitation_data import (
+    collect,
+    collect_in_workers,
+    fly_in_workers,
+    worker_pool,
+)
 from uav_formation_baselines.torch_policy import ACTIVATIONS, NormalisedMLP, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config import CostConfig, Scenario
@@ -55,8 +60,8 @@ from uav_formation_env.config_io import (
     save_scenario,
     with_overrides,
 )
-from uav_formation_env.evaluation import run_episode_groups, summarise_groups
-from uav_formation_env.policies import DMPC_OPTIMIZERS, make_policy
+from uav_formation_env.evaluation import summarise_groups
+from uav_formation_env.policies import DMPC_OPTIMIZERS
 
 __all__ = [
     "ImitationConfig",
@@ -394,14 +399,13 @@ def _train(
         )
         path = save_policy(model, out / "rounds" / str(r) / "policy.pt", data_obs[:64])
         learner_path = str(path)
-        learner = make_policy(learner_path, scen)
         row = {
             "round": r,
             "samples": len(data_obs),
             "close_fraction": float(np.mean(np.concatenate(all_weights) > 1.0)),
             "loss": loss,
             "teacher_probability": config.beta**r if r else 1.0,
-            **validation_scores(scen, learner, validation),
+            **validation_scores(scen, learner_path, validation, pool, workers),
             "seconds": time.perf_counter() - started,
         }
         rows.append(row)
@@ -437,11 +441,18 @@ def _train(
     return record
 
 
-def validation_scores(scenario: Scenario, learner: Any, seeds: list[int]) -> dict[str, Any]:
-    """A round's validation: ``learner`` flies ``seeds`` (grouped by N) through the project's
-    runner; missions completed, episodes, realised J per UAV, route error max [m] and colliding
-    UAV-steps, as ``validation_*`` columns."""
-    summary = summarise_groups(run_episode_groups(scenario, learner, seeds))
+def validation_scores(
+    scenario: Scenario,
+    learner: str | Path,
+    seeds: list[int],
+    pool: Any = None,
+    workers: int = 1,
+) -> dict[str, Any]:
+    """A round's validation: the saved policy ``learner`` flies ``seeds`` (grouped by N, split
+    over the ``workers`` of ``pool`` if given) through the project's runner; missions completed,
+    episodes, realised J per UAV, route error max [m] and colliding UAV-steps, as
+    ``validation_*`` columns."""
+    summary = summarise_groups(fly_in_workers(pool, workers, scenario, learner, seeds))
     mission = summary["mission"]
     return {
         "validation_completed": mission["completed"],
@@ -472,7 +483,10 @@ def best_round(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def select_round(
-    out: str | Path, validation_seeds: int, validation_seed_start: int | None = None
+    out: str | Path,
+    validation_seeds: int,
+    validation_seed_start: int | None = None,
+    workers: int = 1,
 ) -> dict[str, Any]:
     """Choose a finished run's ``policy.pt`` again, on more validation seeds.
 
@@ -504,9 +518,14 @@ def select_round(
     scen = load_scenario(out / "scenario.yaml")
     seeds = list(range(start, start + validation_seeds))
     rows = []
-    for r in sorted(int(p.name) for p in (out / "rounds").iterdir() if p.name.isdigit()):
-        learner = make_policy(str(out / "rounds" / str(r) / "policy.pt"), scen)
-        rows.append({"round": r, **validation_scores(scen, learner, seeds)})
+    pool = worker_pool(workers)
+    try:
+        for r in sorted(int(p.name) for p in (out / "rounds").iterdir() if p.name.isdigit()):
+            learner = out / "rounds" / str(r) / "policy.pt"
+            rows.append({"round": r, **validation_scores(scen, learner, seeds, pool, workers)})
+    finally:
+        if pool is not None:
+            pool.shutdown()
     best = best_round(rows)
     write_rows(out / "selection.csv", rows)
     keep_round(out, best["round"])
@@ -555,7 +574,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         if args.select is not None:
-            best = select_round(args.out, args.select)
+            best = select_round(args.out, args.select, workers=args.workers)
             done = (
                 f"(round {best['round']}: {best['validation_completed']}/"
                 f"{best['validation_episodes']} validation missions, "

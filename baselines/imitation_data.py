@@ -19,11 +19,12 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.episode import FormationEpisodes
+from uav_formation_env.evaluation import EpisodeBatch, run_episode_groups
 from uav_formation_env.policies import make_policy
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
 from uav_formation_env.scenes import seeds_by_n_uav
 
-__all__ = ["collect", "collect_in_workers", "worker_pool"]
+__all__ = ["collect", "collect_in_workers", "fly", "fly_in_workers", "worker_pool"]
 
 Samples = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
@@ -141,3 +142,27 @@ def collect_in_workers(
     parts = [pool.submit(collect, seeds=[int(s) for s in chunk], **settings) for chunk in chunks]
     results = [part.result() for part in parts]
     return tuple(np.concatenate([r[i] for r in results]) for i in range(4))  # type: ignore[return-value]
+
+
+def fly(scenario: Scenario, learner: str | Path, seeds: Sequence[int]) -> list[EpisodeBatch]:
+    """The saved policy at ``learner`` flies ``seeds`` through the project's runner (one batch per
+    group of equal N)."""
+    return run_episode_groups(scenario, make_policy(str(learner), scenario), list(seeds))
+
+
+def fly_in_workers(
+    pool: Executor | None,
+    workers: int,
+    scenario: Scenario,
+    learner: str | Path,
+    seeds: Sequence[int],
+) -> list[EpisodeBatch]:
+    """:func:`fly` with the seeds split into ``workers`` chunks over ``pool``; the batches of
+    every chunk, in the order of the seeds. A learner's batched matrix products round
+    differently for another batch size, so an episode can differ from the one flown in a
+    single batch by that rounding (float32) and whatever the closed loop makes of it."""
+    chunks = [list(c) for c in np.array_split(np.asarray(seeds, dtype=int), workers) if len(c)]
+    if pool is None or len(chunks) < 2:
+        return fly(scenario, learner, seeds)
+    parts = [pool.submit(fly, scenario, learner, [int(s) for s in chunk]) for chunk in chunks]
+    return [batch for part in parts for batch in part.result()]

@@ -305,6 +305,16 @@ def test_select_round_chooses_again_on_more_validation_seeds(tmp_path: Path, cap
         "validation_seeds": 3,
         "round": chosen,
     }
+    # the same scores with the validation episodes split over two worker processes
+    assert main(["--out", str(tmp_path), "--select", "3", "--workers", "2"]) == 0
+    with open(tmp_path / "selection.csv", encoding="utf-8") as stream:
+        split = list(csv.DictReader(stream))
+    assert [r["validation_completed"] for r in split] == [r["validation_completed"] for r in rows]
+    np.testing.assert_allclose(
+        [float(r["validation_cost"]) for r in split],
+        [float(r["validation_cost"]) for r in rows],
+        rtol=1e-6,
+    )
     # a directory that is not a finished run: one line, nothing written
     assert main(["--out", str(tmp_path / "none"), "--select", "3"]) == 2
     assert capsys.readouterr().err.startswith("error: ")
