@@ -70,13 +70,14 @@ def _row(
 ) -> dict[str, Any]:
     """One table row from :func:`comparison_row` rows: over training runs (``records`` given:
     mean and 95 % half-width over the runs, counts summed) or of one reference policy
-    (``records`` None: its own interval over the evaluation seeds)."""
+    (``records`` None) or one run (an ensemble, say): its own interval over the evaluation
+    seeds, as an interval over one run would be 0."""
     row: dict[str, Any] = {
         "policy": label,
         "training_seeds": None if records is None else len(per_run),
     }
     for key in MEASURES:
-        if records is None:
+        if records is None or len(per_run) == 1:
             ci_key = "realised_cost_ci95" if key == "realised_cost_mean" else f"{key}_ci95"
             row[key], row[f"{key}_ci95"] = per_run[0][key], per_run[0][ci_key]
         else:

@@ -21,7 +21,7 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["ACTIVATIONS", "NormalisedMLP", "save_policy"]
+__all__ = ["ACTIVATIONS", "MeanEnsemble", "NormalisedMLP", "save_policy"]
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {
     "tanh": nn.Tanh,
@@ -88,6 +88,25 @@ class NormalisedMLP(nn.Module):
         """(M, dim) observations -> (M, 6): mean action and log-std."""
         mean = self.mean_action(obs)
         return torch.cat([mean, self.log_std.expand_as(mean)], dim=-1)
+
+
+class MeanEnsemble(nn.Module):
+    """Several policies of this contract as one: (M, dim) -> (M, 6), the members' mean of each
+    output (mean action and log-std).
+
+    Args:
+        members: modules (or loaded TorchScript policies) of the same observation layout.
+    """
+
+    def __init__(self, members: Sequence[nn.Module]) -> None:
+        super().__init__()
+        if not members:
+            raise ValueError("members: give at least one policy")
+        self.members = nn.ModuleList(members)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """(M, dim) observations -> (M, 6): the members' mean."""
+        return torch.stack([member(obs) for member in self.members]).mean(dim=0)
 
 
 def save_policy(module: nn.Module, path: str | Path, sample: np.ndarray) -> Path:

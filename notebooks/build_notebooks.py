@@ -110,7 +110,8 @@ RL_VS_REFERENCE = [
         "# 02 · Learned baselines against the reference policy: cost *and* mission\n\n"
         "The shipped models (`baselines/models/`; one policy shared by every UAV): DAgger, an "
         "MLP cloned from the exact best-response DMPC (`python -m "
-        "uav_formation_baselines.imitation`), and the PPO and SAC models trained on the game "
+        "uav_formation_baselines.imitation`), the mean of four such students (`python -m "
+        "uav_formation_baselines.ensemble`), and the PPO and SAC models trained on the game "
         "cost (`python -m uav_formation_baselines.train`). They fly the same seeds through the "
         "same code as the LFPIO distributed-MPC reference, PIO, the consensus heuristic and "
         "random actions: `uav_formation_env.evaluation.make_policy`, `run_episodes` and "
@@ -149,9 +150,16 @@ def short(scenario):
 
 scenario = short(resolve_scenario("paper"))
 policies = {}  # label -> (policy name or model path, the scenario it flies)
-for run, label in (("paper_dagger", "DAgger"), ("paper_ppo", "PPO"), ("paper_sac", "SAC")):
+shipped = (
+    ("paper_dagger_ensemble", "DAgger ensemble"),
+    ("paper_dagger", "DAgger"),
+    ("paper_ppo", "PPO"),
+    ("paper_sac", "SAC"),
+)
+for run, label in shipped:
     directory = MODELS_DIR / run
-    model = directory / "policy.pt" if (directory / "policy.pt").is_file() else directory / "model.zip"
+    model = directory / "policy.pt"
+    model = model if model.is_file() else directory / "model.zip"
     if model.is_file():  # a model flies the scenario (observation layout) it was trained on
         policies[label] = (str(model), short(resolve_scenario(directory / "scenario.yaml")))
 for name in ("lfpio", "pio", "heuristic", "random"):

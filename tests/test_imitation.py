@@ -222,6 +222,13 @@ def test_results_table_aggregates_runs_over_training_seeds(tmp_path: Path) -> No
     assert reference["cost_ratio_to_reference"] == pytest.approx(1.0)
     assert (out / "learning_curves.png").stat().st_size > 1000
     assert (out / "results.md").read_text().count("\n| ") == 3  # header + 2 rows
+    # one run of an algorithm (an ensemble, say): its interval over the evaluation seeds
+    one = [str(runs[0]), "--seeds", "3", "--compare", "--out", str(tmp_path / "one")]
+    assert results_main(one) == 0
+    (single,) = json.loads((tmp_path / "one" / "results.json").read_text())["rows"]
+    alone = json.loads((tmp_path / "one" / "summaries.json").read_text())[str(runs[0])]
+    assert single["training_seeds"] == 1 and alone["realised_cost_ci95"] > 0
+    assert single["realised_cost_mean_ci95"] == pytest.approx(alone["realised_cost_ci95"])
 
 
 def test_cli_evaluate_flies_a_model_on_its_own_scenario(tmp_path: Path, capsys) -> None:

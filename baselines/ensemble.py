@@ -1,0 +1,138 @@
+"""An ensemble of learned policies: one TorchScript ``policy.pt`` whose action is its members' mean.
+
+    python -m uav_formation_baselines.ensemble --out runs/dagger_paper_ensemble \
+        runs/dagger_paperG_s3 runs/dagger_paperG_s4 ... [--top 4]
+
+Each member is a finished run of the same scenario and observation layout (its ``policy.pt``,
+``scenario.yaml`` and ``config.yaml``). ``--top K`` keeps the K members whose chosen rounds scored
+best on their validation seeds (:func:`validation_score`: the 40-seed scores of ``--select 40``
+where the run has them, else training's own; ranked like
+:func:`~uav_formation_baselines.imitation.best_round`), never on evaluation seeds. The mean of
+several students' actions averages out the errors they do not share: on the paper, the clones
+that fail a mission fail different seeds (baselines/RESULTS.md, "Ensembles of GPU-trained
+students").
+
+The output directory holds ``policy.pt`` (load with ``uav-formation evaluate --policy DIR``),
+``scenario.yaml`` (the members') and ``config.yaml`` (``algorithm: dagger_ensemble``, the
+members with their scores, their summed agent-steps and wall times).
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from pathlib import Path
+from typing import Any
+
+import torch
+import yaml
+
+from uav_formation_baselines.torch_policy import MeanEnsemble, save_policy
+from uav_formation_env.cli import OneLineParser
+from uav_formation_env.config_io import load_scenario, save_scenario
+from uav_formation_env.episode import FormationEpisodes
+
+__all__ = ["build_ensemble", "rank_runs", "validation_score"]
+
+
+def validation_score(run: str | Path) -> dict[str, Any]:
+    """The validation row of a run's chosen round: ``selection.csv``'s (``--select``) if the run
+    has one, else ``rounds.csv``'s; keys ``round``, ``validation_completed``,
+    ``validation_episodes``, ``validation_cost``, ``source``."""
+    run = Path(run)
+    with open(run / "config.yaml", encoding="utf-8") as stream:
+        chosen = int(yaml.safe_load(stream)["best_round"])
+    for name in ("selection.csv", "rounds.csv"):
+        if (run / name).is_file():
+            with open(run / name, encoding="utf-8") as stream:
+                row = next(r for r in csv.DictReader(stream) if int(r["round"]) == chosen)
+            return {
+                "round": chosen,
+                "validation_completed": int(row["validation_completed"]),
+                "validation_episodes": int(row["validation_episodes"]),
+                "validation_cost": float(row["validation_cost"]),
+                "source": name,
+            }
+    raise FileNotFoundError(f"{run} has neither selection.csv nor rounds.csv")
+
+
+def rank_runs(runs: list[str | Path]) -> list[tuple[Path, dict[str, Any]]]:
+    """``runs`` with their :func:`validation_score`, best first: the most completed validation
+    missions, then the lowest realised cost (runs scored on different seed counts are not
+    comparable: a ``ValueError``)."""
+    scored = [(Path(run), validation_score(run)) for run in runs]
+    counts = {score["validation_episodes"] for _, score in scored}
+    if len(counts) > 1:
+        raise ValueError(f"runs were validated on different numbers of seeds: {sorted(counts)}")
+    return sorted(
+        scored, key=lambda item: (-item[1]["validation_completed"], item[1]["validation_cost"])
+    )
+
+
+def build_ensemble(
+    runs: list[str | Path], out: str | Path, top: int | None = None
+) -> dict[str, Any]:
+    """Write the ensemble of ``runs`` (the ``top`` best by :func:`rank_runs`, all if None) to
+    ``out``; returns its ``config.yaml`` record. The members must share one scenario (their
+    ``scenario.yaml`` files load equal), else a ``ValueError`` naming the first that differs."""
+    if len(runs) < 1:
+        raise ValueError("runs: give at least one run directory")
+    if top is not None and (isinstance(top, bool) or not isinstance(top, int) or top < 1):
+        raise ValueError(f"top must be an integer >= 1, got {top!r}")
+    for run in runs:
+        for name in ("policy.pt", "scenario.yaml", "config.yaml"):
+            if not (Path(run) / name).is_file():
+                raise FileNotFoundError(f"{run} is not a finished run: no {name}")
+    ranked = rank_runs(runs)[:top]
+    scenario = load_scenario(ranked[0][0] / "scenario.yaml")
+    for run, _ in ranked[1:]:
+        if load_scenario(run / "scenario.yaml") != scenario:
+            raise ValueError(f"{run}/scenario.yaml differs from {ranked[0][0]}/scenario.yaml")
+    members = [torch.jit.load(str(run / "policy.pt"), map_location="cpu") for run, _ in ranked]
+    # observations the exported file is checked on: the first of two episodes of the scenario
+    episodes = FormationEpisodes(scenario, 2)
+    sample = episodes.reset(seed=[0, 1]).observation
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_policy(MeanEnsemble(members), out / "policy.pt", sample.reshape(-1, sample.shape[-1]))
+    save_scenario(scenario, out / "scenario.yaml")
+    records = []
+    for run, _ in ranked:
+        with open(run / "config.yaml", encoding="utf-8") as stream:
+            records.append(yaml.safe_load(stream))
+    record = {
+        "algorithm": f"{records[0].get('algorithm', 'policy')}_ensemble",
+        "scenario": scenario.name,
+        "top": top,
+        "candidates": [str(run) for run in runs],
+        "members": [
+            {"run": str(run), "seed": rec.get("seed"), **score}
+            for (run, score), rec in zip(ranked, records)
+        ],
+        # the members' training, summed: what the ensemble cost to train on one machine
+        "agent_steps": int(sum(rec.get("agent_steps", 0) for rec in records)),
+        "wall_time_s": float(sum(rec.get("wall_time_s", 0.0) for rec in records)),
+    }
+    with open(out / "config.yaml", "w", encoding="utf-8") as stream:
+        yaml.safe_dump(record, stream, sort_keys=False)
+    return record
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = OneLineParser(description=__doc__.split("\n")[0])
+    parser.add_argument("runs", nargs="+", help="finished run directories (same scenario)")
+    parser.add_argument("--out", required=True, help="output directory")
+    parser.add_argument("--top", type=int, default=None, help="keep the K best-validated runs")
+    args = parser.parse_args(argv)
+    try:
+        record = build_ensemble(args.runs, args.out, args.top)
+    except (ValueError, FileNotFoundError, KeyError, StopIteration) as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    names = ", ".join(Path(m["run"]).name for m in record["members"])
+    print(f"wrote {args.out}/policy.pt: the mean of {len(record['members'])} members ({names})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,84 @@
+"""Ensembles of learned policies (uav_formation_baselines.ensemble, torch_policy.MeanEnsemble)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+torch = pytest.importorskip("torch")
+
+from uav_formation_baselines.ensemble import build_ensemble, main, rank_runs  # noqa: E402
+from uav_formation_baselines.torch_policy import (  # noqa: E402
+    MeanEnsemble,
+    NormalisedMLP,
+    save_policy,
+)
+from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides  # noqa: E402
+from uav_formation_env.policies import make_policy  # noqa: E402
+
+LOCAL = with_overrides(resolve_scenario("paper"), {"observation": {"kind": "local"}})
+DIM = 95  # the local layout's observation length at N = 5
+
+
+def fake_run(
+    path: Path, seed: int, completed: int, cost: float, episodes: int = 40, scenario=LOCAL
+) -> Path:
+    """A finished run of a seeded random MLP: its chosen round 1 scored (completed, cost) by
+    ``--select``; round 0 scored better, so a reader of the wrong row is caught."""
+    torch.manual_seed(seed)
+    model = NormalisedMLP(np.zeros(DIM), np.ones(DIM), (8,), "tanh")
+    save_policy(model, path / "policy.pt", np.zeros((2, DIM), np.float32))
+    save_scenario(scenario, path / "scenario.yaml")
+    record = {"algorithm": "dagger", "seed": seed, "best_round": 1, "agent_steps": 100 * seed}
+    record["wall_time_s"] = 10.0 * seed
+    (path / "config.yaml").write_text(yaml.safe_dump(record))
+    (path / "selection.csv").write_text(
+        "round,validation_completed,validation_episodes,validation_cost\n"
+        f"0,{episodes},{episodes},1.0\n1,{completed},{episodes},{cost}\n"
+    )
+    return path
+
+
+def test_the_top_runs_by_validation_are_averaged_into_one_loadable_policy(tmp_path: Path) -> None:
+    runs = [
+        fake_run(tmp_path / "a", 1, completed=38, cost=7.0e5),
+        fake_run(tmp_path / "b", 2, completed=40, cost=7.5e5),  # most missions: first
+        fake_run(tmp_path / "c", 3, completed=38, cost=6.9e5),  # same count, cheaper than a
+    ]
+    assert [run.name for run, _ in rank_runs(runs)] == ["b", "c", "a"]
+    record = build_ensemble(runs, tmp_path / "ens", top=2)
+    assert [Path(m["run"]).name for m in record["members"]] == ["b", "c"]
+    assert record["members"][0]["validation_completed"] == 40
+    assert (record["agent_steps"], record["wall_time_s"]) == (500, 50.0)  # b and c summed
+    assert record["algorithm"] == "dagger_ensemble"
+    assert yaml.safe_load((tmp_path / "ens" / "config.yaml").read_text()) == record
+    obs = torch.randn(7, DIM)
+    members = [torch.jit.load(str(tmp_path / name / "policy.pt")) for name in ("b", "c")]
+    loaded = torch.jit.load(str(tmp_path / "ens" / "policy.pt"))
+    with torch.no_grad():
+        torch.testing.assert_close(loaded(obs), (members[0](obs) + members[1](obs)) / 2)
+    policy = make_policy(str(tmp_path / "ens"), LOCAL)  # what evaluate --policy DIR loads
+    assert policy.act_batch(np.zeros((1, 5, DIM), np.float32)).shape == (1, 5, 3)
+
+
+def test_members_of_other_scenes_or_scores_are_refused_in_one_line(tmp_path: Path, capsys) -> None:
+    full = resolve_scenario("paper")
+    runs = [
+        fake_run(tmp_path / "a", 1, 40, 7e5),
+        fake_run(tmp_path / "b", 2, 39, 7e5, scenario=full),
+    ]
+    with pytest.raises(ValueError, match="b/scenario.yaml differs from"):
+        build_ensemble(runs, tmp_path / "ens")
+    assert not (tmp_path / "ens").exists()
+    fake_run(tmp_path / "c", 3, 8, 7e5, episodes=8)
+    with pytest.raises(ValueError, match="different numbers of seeds: \\[8, 40\\]"):
+        rank_runs([tmp_path / "a", tmp_path / "c"])
+    assert main(["--out", str(tmp_path / "ens"), str(tmp_path / "a"), "--top", "0"]) == 2
+    assert capsys.readouterr().err.strip() == "error: top must be an integer >= 1, got 0"
+    assert main(["--out", str(tmp_path / "ens"), str(tmp_path / "none")]) == 2
+    assert "is not a finished run: no policy.pt" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="members: give at least one policy"):
+        MeanEnsemble([])
