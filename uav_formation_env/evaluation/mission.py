@@ -194,10 +194,12 @@ def mission_metrics(
     velocity_error2 = ((v - v_preset) ** 2).sum(axis=-1)  # (T+1, B, N)
 
     batch = z.shape[1]
-    field = obstacle_field(
-        [scenario.avoidance] * batch if scenes is None else [s.avoidance for s in scenes]
-    )
-    centres, detection, present = field.centres, field.r_detect, field.present  # (B, O, ...)
+    avoidances = [scenario.avoidance] * batch if scenes is None else [s.avoidance for s in scenes]
+    field = obstacle_field(avoidances)
+    # met at the detection distance d^o, whatever distance the topology rules activate at
+    margins = np.array([a.detection_margin for a in avoidances])[:, None]  # (B, 1)
+    centres, present = field.centres, field.present  # (B, O, ...)
+    detection = field.radii + margins  # (B, O)
     if field.count:
         distance = np.linalg.norm(p[..., None, :2] - centres[:, None], axis=-1).min(axis=2)
         within = (distance <= detection) & present  # (T+1, B, O)
