@@ -45,7 +45,9 @@ def validation_score(run: str | Path) -> dict[str, Any]:
     for name in ("selection.csv", "rounds.csv"):
         if (run / name).is_file():
             with open(run / name, encoding="utf-8") as stream:
-                row = next(r for r in csv.DictReader(stream) if int(r["round"]) == chosen)
+                row = next((r for r in csv.DictReader(stream) if int(r["round"]) == chosen), None)
+            if row is None:
+                raise ValueError(f"{run}/{name} has no row for the chosen round {chosen}")
             return {
                 "round": chosen,
                 "validation_completed": int(row["validation_completed"]),
@@ -126,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         record = build_ensemble(args.runs, args.out, args.top)
-    except (ValueError, FileNotFoundError, KeyError, StopIteration) as error:
+    except (ValueError, FileNotFoundError, KeyError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     names = ", ".join(Path(m["run"]).name for m in record["members"])

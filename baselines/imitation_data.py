@@ -129,17 +129,24 @@ def worker_pool(workers: int) -> Executor | None:
     )
 
 
+def _chunks(seeds: Sequence[int], workers: int) -> list[list[int]]:
+    """``seeds`` in at most ``workers`` consecutive, non-empty chunks of near-equal length."""
+    parts = np.array_split(np.asarray(seeds, dtype=int), workers)
+    return [[int(s) for s in part] for part in parts if len(part)]
+
+
 def collect_in_workers(
     pool: Executor | None, workers: int, seeds: Sequence[int], **settings: Any
 ) -> Samples:
     """:func:`collect` with the seeds split into ``workers`` consecutive chunks, one per worker
-    of ``pool`` (in this process when ``pool`` is None); the same samples in the same order as
-    one :func:`collect` of every seed. ``settings``: :func:`collect`'s other arguments (a
-    learner as a path, which a worker can load)."""
-    chunks = [list(c) for c in np.array_split(np.asarray(seeds, dtype=int), workers) if len(c)]
+    of ``pool`` (in this process when ``pool`` is None); the samples of one :func:`collect` of
+    every seed, in the same order (with a learner, up to the float32 rounding of its batched
+    products, which depends on the batch size). ``settings``: :func:`collect`'s other
+    arguments (a learner as a path, which a worker can load)."""
+    chunks = _chunks(seeds, workers)
     if pool is None or len(chunks) < 2:
         return collect(seeds=list(seeds), **settings)
-    parts = [pool.submit(collect, seeds=[int(s) for s in chunk], **settings) for chunk in chunks]
+    parts = [pool.submit(collect, seeds=chunk, **settings) for chunk in chunks]
     results = [part.result() for part in parts]
     return tuple(np.concatenate([r[i] for r in results]) for i in range(4))  # type: ignore[return-value]
 
@@ -161,8 +168,8 @@ def fly_in_workers(
     every chunk, in the order of the seeds. A learner's batched matrix products round
     differently for another batch size, so an episode can differ from the one flown in a
     single batch by that rounding (float32) and whatever the closed loop makes of it."""
-    chunks = [list(c) for c in np.array_split(np.asarray(seeds, dtype=int), workers) if len(c)]
+    chunks = _chunks(seeds, workers)
     if pool is None or len(chunks) < 2:
         return fly(scenario, learner, seeds)
-    parts = [pool.submit(fly, scenario, learner, [int(s) for s in chunk]) for chunk in chunks]
+    parts = [pool.submit(fly, scenario, learner, chunk) for chunk in chunks]
     return [batch for part in parts for batch in part.result()]

@@ -80,5 +80,11 @@ def test_members_of_other_scenes_or_scores_are_refused_in_one_line(tmp_path: Pat
     assert capsys.readouterr().err.strip() == "error: top must be an integer >= 1, got 0"
     assert main(["--out", str(tmp_path / "ens"), str(tmp_path / "none")]) == 2
     assert "is not a finished run: no policy.pt" in capsys.readouterr().err
+    lost = fake_run(tmp_path / "d", 4, 40, 7e5)
+    (lost / "selection.csv").write_text(
+        "round,validation_completed,validation_episodes,validation_cost\n0,40,40,1.0\n"
+    )
+    with pytest.raises(ValueError, match="selection.csv has no row for the chosen round 1"):
+        rank_runs([lost])
     with pytest.raises(ValueError, match="members: give at least one policy"):
         MeanEnsemble([])
