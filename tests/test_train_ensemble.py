@@ -1,0 +1,95 @@
+"""The DAgger ensemble recipe in one command (uav_formation_baselines.train_ensemble)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+torch = pytest.importorskip("torch")
+
+from uav_formation_baselines import train_ensemble as recipe  # noqa: E402
+from uav_formation_baselines.ensemble import rank_runs  # noqa: E402
+from uav_formation_baselines.imitation import load_config, train_imitation  # noqa: E402
+from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
+from uav_formation_env.episode import FormationEpisodes  # noqa: E402
+from uav_formation_env.policies import make_policy  # noqa: E402
+
+# students of seconds: 2 s episodes (10 steps), one epoch, an 8-unit layer, 2 validation seeds
+TINY = [
+    "rounds=2", "episodes=1", "duration=2.0", "hidden=[8]", "epochs=1", "validation_seeds=2",
+    "start_episodes=1", "start_duration=0.4",
+]  # fmt: skip
+SHORT = with_overrides(
+    resolve_scenario("paper"), {"duration": 2.0, "observation": {"kind": "local"}}
+)
+
+
+def _actions(path: Path, obs: np.ndarray) -> np.ndarray:
+    return np.asarray(make_policy(str(path), SHORT).act_batch(obs))
+
+
+def test_the_recipe_trains_each_seed_as_imitation_does_and_averages_the_best(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "ens"
+    record = recipe.train_ensemble(
+        "paper", out, runs=3, top=2, seed_start=5, workers=1, sets=TINY, progress=False
+    )
+    members = [out / "members" / f"seed_{s}" for s in (5, 6, 7)]
+    assert record["recipe"]["seeds"] == [5, 6, 7]
+    # the two best by validation, in rank order, and every student's steps counted
+    best = [str(run) for run, _ in rank_runs(members)[:2]]
+    assert [m["run"] for m in record["members"]] == best
+    steps = [yaml.safe_load((m / "config.yaml").read_text())["agent_steps"] for m in members]
+    assert record["recipe_agent_steps"] == sum(steps) > 0
+    assert yaml.safe_load((out / "config.yaml").read_text())["recipe_wall_time_s"] > 0
+    # a student is the run `imitation` trains for its seed with the recipe's settings
+    config = load_config("paper", recipe.RECIPE, **{k: yaml.safe_load(v) for k, v in
+                                                     (s.split("=") for s in TINY)})  # fmt: skip
+    train_imitation("paper", tmp_path / "direct", config, seed=6, progress=False)
+    obs = FormationEpisodes(SHORT, 2).reset(seed=[0, 1]).observation
+    np.testing.assert_array_equal(
+        _actions(members[1] / "policy.pt", obs), _actions(tmp_path / "direct" / "policy.pt", obs)
+    )
+    # the ensemble's output is the mean of its members' (before act_batch bounds the action)
+    flat = torch.as_tensor(obs.reshape(-1, obs.shape[-1]))
+    with torch.no_grad():
+        mean = sum(torch.jit.load(str(Path(run) / "policy.pt"))(flat) for run in best) / 2
+        torch.testing.assert_close(torch.jit.load(str(out / "policy.pt"))(flat), mean)
+
+
+def test_a_failing_student_stops_the_recipe_with_its_seed_and_last_line(
+    tmp_path: Path, monkeypatch, capsys
+) -> None:
+    def failing(scenario, out, seed, *rest):
+        return [sys.executable, "-c", f"print('student {seed} is broken'); raise SystemExit(3)"]
+
+    monkeypatch.setattr(recipe, "_student_command", failing)
+    argv = ["--out", str(tmp_path / "ens"), "--runs", "2", "--workers", "1", "--quiet"]
+    assert recipe.main([*argv, "--set", *TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("error: student seed ") and "(exit 3): student " in err[0]
+    assert not (tmp_path / "ens" / "policy.pt").exists()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--runs", "0"], "error: runs must be an integer >= 1, got 0"),
+        (["--runs", "2", "--top", "3"], "error: top must be at most runs (2), got 3"),
+        (["--workers", "0"], "error: workers must be an integer >= 1, got 0"),
+        (["--set", "round=2"], "error: unknown key 'round'"),
+    ],
+)
+def test_bad_arguments_are_one_line_errors_before_any_student_starts(
+    tmp_path: Path, capsys, args: list[str], message: str
+) -> None:
+    assert recipe.main(["--out", str(tmp_path / "ens"), "--quiet", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(message)
+    assert not (tmp_path / "ens").exists()
