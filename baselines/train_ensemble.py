@@ -17,7 +17,8 @@ The output directory holds the ensemble (``policy.pt``, ``scenario.yaml``; load 
 ``uav-formation evaluate --policy DIR``), ``config.yaml`` (the ensemble's record with the recipe:
 seeds, settings, and ``recipe_wall_time_s``, the time from the first launch to the written
 ensemble) and ``members/seed_<k>/`` (every student's run and ``.log``). On one GPU machine
-(16 cores) 8 students with 2 workers each run at once.
+(16 cores) 8 students with 2 workers each run at once: 209-234 s for the paper's recipe
+(baselines/RESULTS.md, "Five minutes on one GPU").
 """
 
 from __future__ import annotations

@@ -152,6 +152,7 @@ scenario = short(resolve_scenario("paper"))
 policies = {}  # label -> (policy name or model path, the scenario it flies)
 shipped = (
     ("paper_dagger_ensemble", "DAgger ensemble"),
+    ("paper_dagger_recipe", "DAgger recipe (5 min)"),
     ("paper_dagger", "DAgger"),
     ("paper_ppo", "PPO"),
     ("paper_sac", "SAC"),
