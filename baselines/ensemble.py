@@ -31,6 +31,7 @@ from uav_formation_baselines.torch_policy import MeanEnsemble, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config_io import load_scenario, save_scenario
 from uav_formation_env.episode import FormationEpisodes
+from uav_formation_env.scenes import seeds_by_n_uav
 
 __all__ = ["build_ensemble", "rank_runs", "validation_score"]
 
@@ -91,9 +92,10 @@ def build_ensemble(
         if load_scenario(run / "scenario.yaml") != scenario:
             raise ValueError(f"{run}/scenario.yaml differs from {ranked[0][0]}/scenario.yaml")
     members = [torch.jit.load(str(run / "policy.pt"), map_location="cpu") for run, _ in ranked]
-    # observations the exported file is checked on: the first of two episodes of the scenario
-    episodes = FormationEpisodes(scenario, 2)
-    sample = episodes.reset(seed=[0, 1]).observation
+    # observations the exported file is checked on: the first of the scenario's episodes 0 and 1
+    # (of one N: a scene distribution over N, random_swarm, may draw two)
+    n_uav, seeds = next(iter(seeds_by_n_uav(scenario, [0, 1]).items()))
+    sample = FormationEpisodes(scenario, len(seeds), n_uav=n_uav).reset(seed=seeds).observation
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     save_policy(MeanEnsemble(members), out / "policy.pt", sample.reshape(-1, sample.shape[-1]))

@@ -17,20 +17,28 @@ from uav_formation_baselines.torch_policy import (  # noqa: E402
     save_policy,
 )
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides  # noqa: E402
+from uav_formation_env.episode import FormationEpisodes  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
+from uav_formation_env.scenes import seeds_by_n_uav  # noqa: E402
 
 LOCAL = with_overrides(resolve_scenario("paper"), {"observation": {"kind": "local"}})
 DIM = 95  # the local layout's observation length at N = 5
 
 
 def fake_run(
-    path: Path, seed: int, completed: int, cost: float, episodes: int = 40, scenario=LOCAL
+    path: Path,
+    seed: int,
+    completed: int,
+    cost: float,
+    episodes: int = 40,
+    scenario=LOCAL,
+    dim: int = DIM,
 ) -> Path:
     """A finished run of a seeded random MLP: its chosen round 1 scored (completed, cost) by
     ``--select``; round 0 scored better, so a reader of the wrong row is caught."""
     torch.manual_seed(seed)
-    model = NormalisedMLP(np.zeros(DIM), np.ones(DIM), (8,), "tanh")
-    save_policy(model, path / "policy.pt", np.zeros((2, DIM), np.float32))
+    model = NormalisedMLP(np.zeros(dim), np.ones(dim), (8,), "tanh")
+    save_policy(model, path / "policy.pt", np.zeros((2, dim), np.float32))
     save_scenario(scenario, path / "scenario.yaml")
     record = {"algorithm": "dagger", "seed": seed, "best_round": 1, "agent_steps": 100 * seed}
     record["wall_time_s"] = 10.0 * seed
@@ -88,3 +96,20 @@ def test_members_of_other_scenes_or_scores_are_refused_in_one_line(tmp_path: Pat
         rank_runs([lost])
     with pytest.raises(ValueError, match="members: give at least one policy"):
         MeanEnsemble([])
+
+
+def test_an_ensemble_of_a_scene_distribution_over_n_is_built_and_flies_any_n(
+    tmp_path: Path,
+) -> None:
+    swarm = resolve_scenario("random_swarm")  # N drawn in 3..10: one observation length for all
+    groups = seeds_by_n_uav(swarm, list(range(6)))
+    assert len(groups) > 1  # seeds 0-5 draw several N
+    n_uav, seeds = next(iter(groups.items()))
+    dim = FormationEpisodes(swarm, 1, n_uav=n_uav).reset(seed=seeds[:1]).observation.shape[-1]
+    runs = [fake_run(tmp_path / name, k, 30, 7e5, scenario=swarm, dim=dim) for k, name in
+            enumerate("ab", start=1)]  # fmt: skip
+    build_ensemble(runs, tmp_path / "ens")
+    policy = make_policy(str(tmp_path / "ens"), swarm)
+    for n_uav, group in groups.items():
+        obs = FormationEpisodes(swarm, len(group), n_uav=n_uav).reset(seed=group).observation
+        assert policy.act_batch(obs).shape == (len(group), n_uav, 3)
