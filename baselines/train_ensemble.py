@@ -23,8 +23,10 @@ ensemble) and ``members/seed_<k>/`` (every student's run and ``.log``). On one G
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -60,6 +62,15 @@ def _student_command(
         "--out", str(out), "--seed", str(seed), "--threads", "1", "--workers", str(workers),
         "--device", device, "--config", str(config), "--quiet", *(["--set", *sets] if sets else []),
     ]  # fmt: skip
+
+
+def _stop(process: subprocess.Popen) -> None:
+    """Kill a student and the worker processes it spawned (its process group on POSIX)."""
+    if hasattr(os, "killpg"):
+        with contextlib.suppress(ProcessLookupError):  # the group is already gone
+            os.killpg(process.pid, signal.SIGKILL)
+    process.kill()  # the student itself, whatever its group
+    process.wait()
 
 
 def _rounds_done(run: Path) -> int:
@@ -121,7 +132,11 @@ def train_ensemble(
                 command = _student_command(
                     scenario, run_dirs[seed], seed, workers, device, config_path, sets
                 )
-                running[seed] = (subprocess.Popen(command, stdout=log, stderr=log, env=env), log)
+                # a session of its own: stopping a student stops its episode workers too
+                process = subprocess.Popen(
+                    command, stdout=log, stderr=log, env=env, start_new_session=True
+                )
+                running[seed] = (process, log)
             time.sleep(0.5)
             for seed, (process, log) in list(running.items()):
                 if process.poll() is None:
@@ -140,8 +155,7 @@ def train_ensemble(
                 bar.update(done - bar.n)
     finally:
         for process, log in running.values():
-            process.kill()
-            process.wait()
+            _stop(process)
             log.close()
         bar.close()
     record = build_ensemble([run_dirs[s] for s in seeds], out, top)

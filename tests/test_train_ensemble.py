@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -93,3 +94,44 @@ def test_bad_arguments_are_one_line_errors_before_any_student_starts(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(message)
     assert not (tmp_path / "ens").exists()
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie waiting for its reaper does not)."""
+    status = Path(f"/proc/{pid}/status")
+    if not status.is_file():
+        return False
+    return "\nState:\tZ" not in status.read_text()
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="reads /proc (Linux)")
+def test_a_failing_student_stops_the_processes_the_others_started(
+    tmp_path: Path, monkeypatch
+) -> None:
+    marker = tmp_path / "worker.pid"
+
+    def students(scenario, out, seed, *rest):
+        if seed == 0:  # a student whose episode worker runs on
+            code = (
+                "import subprocess, sys, time\n"
+                "w = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(120)'])\n"
+                f"open({str(marker)!r}, 'w').write(str(w.pid)); time.sleep(120)"
+            )
+        else:  # fails once the other's worker is up
+            code = (
+                "import os, time\n"
+                f"while not os.path.exists({str(marker)!r}): time.sleep(0.1)\n"
+                "time.sleep(0.5); raise SystemExit('broken')"
+            )
+        return [sys.executable, "-c", code]
+
+    monkeypatch.setattr(recipe, "_student_command", students)
+    with pytest.raises(RuntimeError, match="student seed 1 failed"):
+        recipe.train_ensemble("paper", tmp_path / "ens", runs=2, workers=1, sets=TINY,
+                              progress=False)  # fmt: skip
+    worker = int(marker.read_text())
+    for _ in range(50):  # the kill is sent before train_ensemble returns; reaping may lag
+        if not _alive(worker):
+            break
+        time.sleep(0.1)
+    assert not _alive(worker)
