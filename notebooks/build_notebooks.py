@@ -152,7 +152,8 @@ scenario = short(resolve_scenario("paper"))
 policies = {}  # label -> (policy name or model path, the scenario it flies)
 shipped = (
     ("paper_dagger_ensemble", "DAgger ensemble"),
-    ("paper_dagger_recipe", "DAgger recipe (5 min)"),
+    ("paper_dagger_recipe", "DAgger recipe (GPU, 4 min)"),
+    ("paper_dagger_recipe_cpu", "DAgger recipe (2 cores, 23 min)"),
     ("paper_dagger", "DAgger"),
     ("paper_ppo", "PPO"),
     ("paper_sac", "SAC"),
