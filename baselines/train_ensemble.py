@@ -18,7 +18,7 @@ The output directory holds the ensemble (``policy.pt``, ``scenario.yaml``; load 
 seeds, settings, and ``recipe_wall_time_s``, the time from the first launch to the written
 ensemble) and ``members/seed_<k>/`` (every student's run and ``.log``). On one GPU machine
 (16 cores) 8 students with 2 workers each run at once: 209-234 s for the paper's recipe; on 2
-cores, ``--runs 3 --workers 1 --set 'hidden=[256, 256]'`` took 1368-1391 s
+cores, ``--runs 3 --workers 1 --set 'hidden=[256, 256]'`` took 1368-1503 s
 (baselines/RESULTS.md, "Five minutes on one GPU, or 23 on two cores").
 """
 
