@@ -66,6 +66,7 @@ __all__ = [
     "ImitationConfig",
     "best_round",
     "collect",
+    "config_section",
     "load_config",
     "resolve_device",
     "sample_weights",
@@ -201,6 +202,11 @@ class ImitationConfig:
         if unknown:
             raise ValueError(f"unknown key {unknown[0]!r} in {where}; known keys: {sorted(known)}")
         return cls(**values)
+
+
+def config_section(scenario: str | Path) -> str:
+    """The YAML section a scenario reads: its registered name, ``default`` for a YAML path."""
+    return "default" if str(scenario).endswith((".yaml", ".yml")) else str(scenario)
 
 
 def load_config(scenario_key: str, path: str | Path | None = None, **patch: Any) -> ImitationConfig:
@@ -481,8 +487,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"J {best['validation_cost']:.4g})"
             )
         else:
-            key = args.scenario if not str(args.scenario).endswith((".yaml", ".yml")) else "default"
-            config = load_config(key, args.config, **parse_set(args.set))
+            config = load_config(config_section(args.scenario), args.config, **parse_set(args.set))
             record = train_imitation(
                 args.scenario,
                 args.out,

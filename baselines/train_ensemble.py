@@ -41,7 +41,7 @@ from tqdm import tqdm
 from uav_formation_baselines import HYPERPARAMS_DIR
 from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.ensemble import build_ensemble
-from uav_formation_baselines.imitation import load_config, resolve_device
+from uav_formation_baselines.imitation import config_section, load_config, resolve_device
 from uav_formation_env.cli import OneLineParser
 
 __all__ = ["RECIPE", "train_ensemble"]
@@ -111,8 +111,8 @@ def train_ensemble(
         raise ValueError(f"top must be at most runs ({runs}), got {top}")
     config_path = Path(config) if config is not None else RECIPE
     sets = list(sets or [])
-    key = scenario if not str(scenario).endswith((".yaml", ".yml")) else "default"
-    settings = load_config(key, config_path, **parse_set(sets))  # bad settings fail here, once
+    # bad settings fail here, once, not in every student
+    settings = load_config(config_section(scenario), config_path, **parse_set(sets))
     device = resolve_device(device)
     out = Path(out)
     members = out / "members"

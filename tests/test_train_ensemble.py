@@ -13,6 +13,7 @@ import yaml
 torch = pytest.importorskip("torch")
 
 from uav_formation_baselines import train_ensemble as recipe  # noqa: E402
+from uav_formation_baselines.config import parse_set  # noqa: E402
 from uav_formation_baselines.ensemble import rank_runs  # noqa: E402
 from uav_formation_baselines.imitation import load_config, train_imitation  # noqa: E402
 from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
@@ -49,8 +50,7 @@ def test_the_recipe_trains_each_seed_as_imitation_does_and_averages_the_best(
     assert record["recipe_agent_steps"] == sum(steps) > 0
     assert yaml.safe_load((out / "config.yaml").read_text())["recipe_wall_time_s"] > 0
     # a student is the run `imitation` trains for its seed with the recipe's settings
-    config = load_config("paper", recipe.RECIPE, **{k: yaml.safe_load(v) for k, v in
-                                                     (s.split("=") for s in TINY)})  # fmt: skip
+    config = load_config("paper", recipe.RECIPE, **parse_set(TINY))
     train_imitation("paper", tmp_path / "direct", config, seed=6, progress=False)
     obs = FormationEpisodes(SHORT, 2).reset(seed=[0, 1]).observation
     np.testing.assert_array_equal(
