@@ -18,6 +18,7 @@ from typing import Any
 import yaml
 
 from uav_formation_baselines import HYPERPARAMS_DIR
+from uav_formation_env.config_io import SCENARIOS
 
 # Training set-up keys (not constructor arguments of the algorithm) and their defaults.
 TRAINING_DEFAULTS: dict[str, Any] = {
@@ -57,6 +58,25 @@ def hyperparams_path(algo: str) -> Path:
     return HYPERPARAMS_DIR / f"{algo.lower()}.yml"
 
 
+def scenario_sections(path: str | Path) -> dict[str, Any]:
+    """The sections of a YAML keyed by scenario name: ``default`` and registered scenario names.
+
+    A misspelt section would otherwise be skipped without a word (its scenario would train with
+    ``default`` alone), so any other top-level key is a ``ValueError`` naming it.
+    """
+    with open(path, encoding="utf-8") as stream:
+        table = yaml.safe_load(stream) or {}
+    if not isinstance(table, Mapping):
+        raise ValueError(f"{path}: expected a mapping of sections, got {type(table).__name__}")
+    for key in table:
+        if key != "default" and key not in SCENARIOS:
+            raise ValueError(
+                f"{path}: unknown section {key!r}; expected 'default' or a registered scenario "
+                f"name ({', '.join(sorted(SCENARIOS))})"
+            )
+    return dict(table)
+
+
 def load_hyperparams(algo: str, scenario_key: str, path: str | Path | None = None) -> dict:
     """The merged hyper-parameters of ``algo`` on a scenario.
 
@@ -67,8 +87,7 @@ def load_hyperparams(algo: str, scenario_key: str, path: str | Path | None = Non
         path: YAML file (None: the shipped one).
     """
     path = Path(path) if path is not None else hyperparams_path(algo)
-    with open(path, encoding="utf-8") as stream:
-        table = yaml.safe_load(stream) or {}
+    table = scenario_sections(path)
     if "default" not in table:
         raise ValueError(f"{path} has no 'default' section")
     params = _deep_merge(TRAINING_DEFAULTS, table["default"])

@@ -43,7 +43,7 @@ import numpy as np
 import yaml
 
 from uav_formation_baselines import HYPERPARAMS_DIR
-from uav_formation_baselines.config import parse_set
+from uav_formation_baselines.config import parse_set, scenario_sections
 from uav_formation_baselines.imitation_data import collect, collect_in_workers, worker_pool
 from uav_formation_baselines.imitation_select import (
     best_round,
@@ -213,8 +213,7 @@ def load_config(scenario_key: str, path: str | Path | None = None, **patch: Any)
     """The ``default`` section of the YAML (``baselines/hyperparams/bc.yml``), the scenario's
     section over it, then ``patch``."""
     path = Path(path) if path is not None else HYPERPARAMS_DIR / "bc.yml"
-    with open(path, encoding="utf-8") as stream:
-        table = yaml.safe_load(stream) or {}
+    table = scenario_sections(path)
     values = {**(table.get("default") or {}), **(table.get(scenario_key) or {}), **patch}
     return ImitationConfig.from_mapping(values, where=str(path))
 

@@ -100,6 +100,13 @@ def test_hyperparams_load_for_every_scenario(algo):
         assert isinstance(kwargs["policy_kwargs"]["activation_fn"], type)
 
 
+def test_hyperparams_reject_a_section_that_names_no_scenario(tmp_path):
+    path = tmp_path / "ppo.yml"
+    path.write_text("default: {n_steps: 64}\nwindyy: {n_steps: 32}\n")
+    with pytest.raises(ValueError, match="unknown section 'windyy'"):
+        load_hyperparams("ppo", "windy", path)
+
+
 def test_set_overrides_parse_yaml_and_reject_unknown_keys():
     patch = parse_set(["learning_rate=1e-3", "policy_kwargs.net_arch=[256, 256]", "copies=4"])
     assert patch == {"learning_rate": 1e-3, "policy_kwargs": {"net_arch": [256, 256]}, "copies": 4}

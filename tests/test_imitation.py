@@ -12,6 +12,7 @@ import yaml
 
 torch = pytest.importorskip("torch")
 
+from uav_formation_baselines import HYPERPARAMS_DIR  # noqa: E402
 from uav_formation_baselines.imitation import (  # noqa: E402
     ImitationConfig,
     best_round,
@@ -63,6 +64,20 @@ def test_config_rejects_unknown_and_bad_values(tmp_path: Path) -> None:
     config = load_config("paper", path, epochs=4)
     assert (config.rounds, config.episodes, config.epochs) == (2, 3, 4)
     assert load_config("paper").teacher == "exact"  # the shipped file loads
+    path.write_text("default: {rounds: 2}\nrandom_feilds: {episodes: 3}\n")  # a misspelt section
+    with pytest.raises(ValueError, match="unknown section 'random_feilds'"):
+        load_config("random_fields", path)
+
+
+@pytest.mark.parametrize("name", ["bc.yml", "bc_ensemble.yml"])
+def test_every_section_of_the_shipped_files_configures_its_scenario(name: str) -> None:
+    path = HYPERPARAMS_DIR / name
+    table = yaml.safe_load(path.read_text())
+    for section in table:
+        config = load_config(section, path)  # valid values, merged over `default`
+        for key, value in (table[section] or {}).items():
+            expected = tuple(value) if isinstance(value, list) else value
+            assert getattr(config, key) == expected, (section, key)
 
 
 def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
