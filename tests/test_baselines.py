@@ -36,6 +36,11 @@ from uav_formation_baselines.evaluate import (  # noqa: E402
     run_scenario,
 )
 from uav_formation_baselines.evaluate import main as evaluate_main  # noqa: E402
+from uav_formation_baselines.imitation import (  # noqa: E402
+    ImitationConfig,
+    load_config,
+    teacher_scenario,
+)
 from uav_formation_baselines.plots import learning_curve  # noqa: E402
 from uav_formation_baselines.train import main as train_main  # noqa: E402
 from uav_formation_baselines.wrappers import (  # noqa: E402
@@ -282,16 +287,45 @@ def test_shipped_torchscript_models_fly_their_scenario(path):
     scenario = run_scenario(path)
     episodes = FormationEpisodes(scenario, 2)
     policy = make_policy(str(path), scenario)
+    teacher = _teacher_of(path, scenario)
     if hasattr(policy, "reset"):  # as the runner: stateful policies get one stream per seed
         policy.reset(2, seeds=[0, 1])
     step = episodes.reset(seed=[0, 1])
+    actions, teacher_actions = [], []
     for _ in range(10):
         action = policy.act_batch(step.observation)
         assert action.shape == (2, scenario.n_uav, 3) and np.all(np.isfinite(action))
         assert np.all(np.abs(action) <= scenario.dynamics.u_max)
+        actions.append(action)
+        teacher_actions.append(teacher.act_batch(step.observation, **_plans_of(step, scenario)))
         step = episodes.step(action)
         # a clone of the reference holds the formation over the first seconds
         assert step.result.min_separation.min() > scenario.collision.uav_distance
+    # ... and acts as the teacher it was cloned from would, on the states it flies into: the
+    # shipped clones are at 0.31-0.60 of the teacher's action norm, a policy blind to its
+    # observation (zeros in) at 1.0-1.35 (it flies the formation safely through 2 s all the same)
+    difference = np.linalg.norm(np.array(actions) - np.array(teacher_actions))
+    assert difference / np.linalg.norm(teacher_actions) < 0.8
+
+
+def _teacher_of(path: Path, scenario):
+    """The reference a shipped DAgger clone learned from, planning with its training cost: the
+    settings recorded with the model (one student's, or the recipe's), else the shipped bc.yml
+    section of its scenario."""
+    with open(path.parent / "config.yaml", encoding="utf-8") as stream:
+        record = yaml.safe_load(stream)
+    settings = record.get("config") or record.get("recipe", {}).get("settings")
+    config = (
+        ImitationConfig.from_mapping(settings, where=str(path.parent / "config.yaml"))
+        if settings
+        else load_config(record["scenario"])
+    )
+    return make_policy(config.teacher, teacher_scenario(scenario, config))
+
+
+def _plans_of(step, scenario) -> dict:
+    """The teacher's view of whose plans fill each neighbour slot (local observation only)."""
+    return {"neighbour_index": step.neighbour_index} if scenario.observation.kind == "local" else {}
 
 
 def _normalized_venv(policy, scenario):
