@@ -61,6 +61,7 @@ from uav_formation_env.evaluation import (  # noqa: E402
     run_episodes,
     summarise,
 )
+from uav_formation_env.scenes import seeds_by_n_uav  # noqa: E402
 
 SHORT_N3 = {"duration": 4.0}  # 20 control steps per episode
 
@@ -285,16 +286,20 @@ def test_shipped_torchscript_models_fly_their_scenario(path):
     # the first 2 s of full-length episodes: a drawn scene fills the episode's duration, so a
     # shorter one would be another scene (or none: random_fields cannot place its field in 2 s)
     scenario = run_scenario(path)
-    episodes = FormationEpisodes(scenario, 2)
+    # two seeds that draw one N (a distribution over N, random_swarm, is flown one N at a time)
+    n_uav, seeds = next(
+        (n, group) for n, group in seeds_by_n_uav(scenario, range(40)).items() if len(group) > 1
+    )
+    episodes = FormationEpisodes(scenario, 2, n_uav=n_uav)
     policy = make_policy(str(path), scenario)
     teacher = _teacher_of(path, scenario)
     if hasattr(policy, "reset"):  # as the runner: stateful policies get one stream per seed
-        policy.reset(2, seeds=[0, 1])
-    step = episodes.reset(seed=[0, 1])
+        policy.reset(2, seeds=seeds[:2])
+    step = episodes.reset(seed=seeds[:2])
     actions, teacher_actions = [], []
     for _ in range(10):
         action = policy.act_batch(step.observation)
-        assert action.shape == (2, scenario.n_uav, 3) and np.all(np.isfinite(action))
+        assert action.shape == (2, n_uav, 3) and np.all(np.isfinite(action))
         assert np.all(np.abs(action) <= scenario.dynamics.u_max)
         actions.append(action)
         teacher_actions.append(teacher.act_batch(step.observation, **_plans_of(step, scenario)))
