@@ -222,6 +222,62 @@ ax.set_ylabel("log10 mean stage J")
 ax.legend()
 fig.tight_layout()"""
     ),
+    new_markdown_cell(
+        "## New scenes: the scene distributions\n\n"
+        "Every seed of `random_fields` (N = 5, 1-4 obstacles on a drawn route) and "
+        "`random_swarm` (N drawn in 3-10, any formation shape, fields, wind) draws its own "
+        "scene. The shipped student of each distribution (the DAgger recipe on two cores, "
+        "`python -m uav_formation_baselines.train_ensemble --scenario TASK`; one policy for every "
+        "N, on the N-independent local observation) flies held-out seeds beside LFPIO; "
+        "`run_episode_groups` flies one batch per drawn N and `summarise_groups` joins them. "
+        "Full size: seeds 0-19 of each (`baselines/RESULTS.md` has 100); small: one scene of "
+        "each, for the full 200 s (a drawn scene fills its episode's duration)."
+    ),
+    new_code_cell(
+        """from uav_formation_env.evaluation import run_episode_groups, summarise_groups
+from uav_formation_env.scenes import seeds_by_n_uav
+
+students = {"random_fields": "random_fields_dagger_recipe_cpu",
+            "random_swarm": "random_swarm_dagger_recipe_cpu"}
+task_summaries = {}
+for task, run in students.items():
+    drawn = resolve_scenario(task)
+    task_seeds = list(range(20))
+    if SMALL:  # the first scene of the smallest N among them: the cheapest full-length episode
+        by_n = seeds_by_n_uav(drawn, task_seeds)
+        task_seeds = by_n[min(by_n)][:1]
+    flown = {"lfpio": ("lfpio", drawn)}
+    model = MODELS_DIR / run / "policy.pt"
+    if model.is_file():  # the student flies its own observation layout, on the same scenes
+        flown[run] = (str(model), resolve_scenario(MODELS_DIR / run / "scenario.yaml"))
+    task_summaries[task] = {
+        label: summarise_groups(
+            run_episode_groups(scene, make_policy(name, scene), task_seeds, policy_name=label)
+        )
+        for label, (name, scene) in flown.items()
+    }
+    display(Markdown(f"### `{task}`: seeds {task_seeds}" if SMALL else f"### `{task}`: seeds 0-19"))
+    display(Markdown(format_markdown(task_summaries[task], reference="lfpio")))
+    display(Markdown(format_failures(task_summaries[task], markdown=True)))"""
+    ),
+    new_markdown_cell(
+        "Each scene's route error max against its realised cost: a policy can be cheap and far "
+        "off the route; a mission fails above the dashed line (100 m) whatever its cost."
+    ),
+    new_code_cell(
+        """fig, axes = plt.subplots(1, len(task_summaries), figsize=(6 * len(task_summaries), 4))
+for ax, (task, by_policy) in zip(np.atleast_1d(axes), task_summaries.items()):
+    for label, summary in by_policy.items():
+        ax.scatter(summary["realised_cost_per_seed"],
+                   summary["mission"]["route_error_max_m_per_seed"], label=label, s=18)
+    ax.axhline(100.0, color="k", ls="--", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_xlabel("realised J per UAV")
+    ax.set_ylabel("route error max [m]")
+    ax.set_title(task)
+    ax.legend(fontsize=8)
+fig.tight_layout()"""
+    ),
 ]
 
 CUSTOM = [
