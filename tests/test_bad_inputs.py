@@ -268,6 +268,8 @@ CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("unknown device", lambda t: ["evaluate", "--backend", "torch", "--device", "gpu7", "--duration", "1"], r"device must name a torch device"),
     ("reproduce: device without torch", lambda t: ["reproduce", "--device", "cpu", "--quick", "--out", str(t)], r"needs backend='torch'"),
     ("counter draws on ray", lambda t: ["evaluate", "--backend", "ray", "--random-source", "counter", "--duration", "1"], r"--random-source counter is not available with --backend ray"),
+    ("shield on the full layout", lambda t: ["evaluate", "--policy", "heuristic", "--shield", "--duration", "1"], r"safety shield reads the local observation layout.*'full'"),
+    ("shield on ray", lambda t: ["evaluate", "--backend", "ray", "--shield", "--duration", "1"], r"--shield is not available with --backend ray"),
     ("reproduce: counter draws on ray", lambda t: ["reproduce", "--backend", "ray", "--random-source", "counter", "--quick", "--out", str(t)], r"random='counter' is not available with backend='ray'"),
 ]  # fmt: skip
 

@@ -18,6 +18,7 @@ A user error (a bad argument, a missing file, an invalid scenario) prints one li
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from dataclasses import replace
@@ -169,6 +170,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         write_records,
     )
     from uav_formation_env.plotting import plot_trajectories
+    from uav_formation_env.policies.shield import SafetyShield
     from uav_formation_env.scenes import n_uav_range
 
     if args.device is not None and args.backend != "torch":
@@ -188,6 +190,8 @@ def _evaluate(args: argparse.Namespace) -> int:
             )
         if args.random_source != "generator":
             raise ValueError("--random-source counter is not available with --backend ray")
+        if args.shield:
+            raise ValueError("--shield is not available with --backend ray; use --backend local")
         make_policy(args.policy, scenario, algo=args.algo)  # bad names fail here, not in a task
         with ray_session(args.address):
             batches = [
@@ -206,16 +210,23 @@ def _evaluate(args: argparse.Namespace) -> int:
         if args.backend == "torch":
             options = {"backend": "torch", "device": torch_device(args.device)}
         policy = make_policy(args.policy, scenario, algo=args.algo, random=args.random_source)
+        if args.shield:
+            policy = SafetyShield(policy, scenario)
         batches = run_episode_groups(
             scenario,
             policy,
             seeds,
-            policy_name=args.policy,
+            policy_name=args.policy + (" + shield" if args.shield else ""),
             progress=not args.quiet,
             desc=desc,
             **options,
         )
     summary = json_ready(summarise_groups(batches))
+    if args.shield:
+        summary["shield"] = {
+            "config": dataclasses.asdict(policy.config),
+            "intervention_rate": policy.intervention_rate,
+        }
     records = []
     for batch in batches:  # one table per N: its rows are per UAV
         name = "records.csv" if len(batches) == 1 else f"records_n{batch.z.shape[2]}.csv"
@@ -231,14 +242,19 @@ def _evaluate(args: argparse.Namespace) -> int:
         f"seed {batch.seeds[0]}",
     )
     observer = "on" if scenario.observer.enabled else "off"
+    shielded = " behind the safety shield" if args.shield else ""
     print(
-        f"{args.policy} on {scenario.name!r} (observer {observer}, {scenario.observation.kind} "
+        f"{args.policy}{shielded} on {scenario.name!r} (observer {observer}, "
+        f"{scenario.observation.kind} "
         f"observation), seeds {seeds[0]}..{seeds[-1]}, {scenario.duration:g} s episodes"
     )
     for line in _mission_lines(summary):
         print(f"  {line}")
     if summary["triggers_mean"] is not None:
         print(f"  event-triggered steps per UAV: {summary['triggers_mean']:.1f}")
+    if args.shield:
+        rate = summary["shield"]["intervention_rate"]
+        print(f"  safety shield changed the action on {100 * rate:.2f} % of UAV-steps")
     written = [*records, out / "summary.json", out / "trajectories.png"]
     print(f"wrote {', '.join(str(path) for path in written)}")
     return 0
@@ -449,6 +465,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--observer", choices=["on", "off"], default=None, help="override the scenario's"
     )
     evaluate.add_argument("--out", default="results/eval", help="output directory")
+    evaluate.add_argument(
+        "--shield",
+        action="store_true",
+        help="fly the policy behind the safety shield (control barrier functions that keep "
+        "each UAV out of the obstacles and away from the UAVs it senses; local observation "
+        "layout): the result is the policy and the shield",
+    )
     _add_common(evaluate, model_scenario=True)
     evaluate.set_defaults(func=_evaluate)
 

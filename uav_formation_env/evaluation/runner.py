@@ -17,6 +17,7 @@ from uav_formation_env.core.array_api import to_numpy
 from uav_formation_env.core.observation import decode_observations
 from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.episode import FormationEpisodes
+from uav_formation_env.policies.broadcast import input_half_width
 from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
 from uav_formation_env.policies.registry import BatchPolicy
 from uav_formation_env.scenes import seeds_by_n_uav
@@ -332,7 +333,7 @@ def policy_plans(
     if isinstance(plans, np.ndarray) and plans.shape[:2] == actions.shape[:2]:
         return plans
     u_max, horizon = scenario.dynamics.u_max, scenario.cost.horizon
-    half_width = np.maximum(u_max - np.abs(decode_observations(obs, scenario.n_uav).estimate), 0)
+    half_width = input_half_width(decode_observations(obs, scenario.n_uav).estimate, u_max)
     held = np.clip(np.clip(actions, -1.0, 1.0) * u_max, -half_width, half_width)
     return np.repeat(held[:, :, None, :], horizon, axis=2)
 

@@ -20,6 +20,7 @@ Shapes: B copies, N UAVs (receivers i and senders j), H horizon steps. Arrays ar
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -48,6 +49,7 @@ __all__ = [
     "HorizonProblems",
     "OwnFrameViews",
     "horizon_problems",
+    "input_half_width",
     "observed_time",
     "own_frame_views",
     "received_plans",
@@ -287,6 +289,21 @@ def horizon_problems(
             mirrored,
             **obstacles,
         )
-    xp = namespace_of(decoded.estimate)
-    half_width = xp.maximum(scenario.dynamics.u_max - xp.abs(decoded.estimate), 0.0)
+    half_width = input_half_width(decoded.estimate, scenario.dynamics.u_max)
     return HorizonProblems(cost=cost, half_width=half_width)
+
+
+def input_half_width(estimate: Any, u_max: float) -> Any:
+    """The box ``|u_n,c| <= u_max - |u_d,c|`` of the formation input, ``u_d = -estimate``: the
+    part of the actuator range the plant leaves to u_n while the observer compensates
+    (docs/model.md §1.5), at least 0.
+
+    Args:
+        estimate: (..., 3) disturbance estimate [m/s^2] (numpy or torch).
+        u_max: per-axis actuator bound [m/s^2].
+
+    Returns:
+        (..., 3) per-axis half width [m/s^2].
+    """
+    xp = namespace_of(estimate)
+    return xp.maximum(u_max - xp.abs(estimate), 0.0)
