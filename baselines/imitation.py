@@ -119,6 +119,10 @@ class ImitationConfig:
             teacher's grazing pass into a collision: on the 20 paper seeds the exact teacher
             passes O1 (radius 30 m) 31.5 m from its centre at the closest, and 39.2 m with the
             clearance term, at a lower paper J (6.55e5 against 7.35e5).
+        shield: the learner flies its DAgger episodes and its validation behind the safety
+            shield (:class:`~uav_formation_env.policies.shield.SafetyShield`, local layout
+            only): it learns the teacher's answer in the states the shield leads to, and is
+            meant to be flown with ``--shield``.
     """
 
     teacher: str = "exact"
@@ -142,6 +146,7 @@ class ImitationConfig:
     validation_seed_start: int = 5_000
     overrides: dict[str, Any] = field(default_factory=dict)
     teacher_cost: dict[str, Any] = field(default_factory=dict)
+    shield: bool = False
 
     def __post_init__(self) -> None:
         if self.teacher not in DMPC_OPTIMIZERS:
@@ -172,6 +177,8 @@ class ImitationConfig:
             raise ValueError(f"proximity_weight must be >= 1, got {self.proximity_weight!r}")
         if not self.obstacle_margin >= 0:
             raise ValueError(f"obstacle_margin must be >= 0 [m], got {self.obstacle_margin!r}")
+        if not isinstance(self.shield, bool):
+            raise ValueError(f"shield must be true or false, got {self.shield!r}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
         if self.duration is not None and not self.duration > 0:
@@ -379,6 +386,7 @@ def _train(
                 mix_seed=seed * 1000 + 10 * r + part,
                 n_steps=steps,
                 teacher_scenario=teacher_scen,
+                shield=config.shield,
             )
             all_obs.append(obs)
             all_actions.append(actions)
@@ -409,7 +417,7 @@ def _train(
             "close_fraction": float(np.mean(np.concatenate(all_weights) > 1.0)),
             "loss": loss,
             "teacher_probability": config.beta**r if r else 1.0,
-            **validation_scores(scen, learner_path, validation, pool, workers),
+            **validation_scores(scen, learner_path, validation, pool, workers, config.shield),
             "seconds": time.perf_counter() - started,
         }
         rows.append(row)

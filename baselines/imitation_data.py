@@ -22,6 +22,7 @@ from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation import EpisodeBatch, run_episode_groups
 from uav_formation_env.policies import make_policy
 from uav_formation_env.policies.dmpc import NashDMPCPolicy
+from uav_formation_env.policies.shield import SafetyShield
 from uav_formation_env.scenes import seeds_by_n_uav
 
 __all__ = ["collect", "collect_in_workers", "fly", "fly_in_workers", "worker_pool"]
@@ -39,6 +40,7 @@ def collect(
     mix_seed: int = 0,
     n_steps: int | None = None,
     teacher_scenario: Scenario | None = None,
+    shield: bool = False,
 ) -> Samples:
     """Fly one episode per seed and label every UAV-step with the teacher's action.
 
@@ -57,6 +59,9 @@ def collect(
         n_steps: control steps flown per episode (None: the whole episode).
         teacher_scenario: the scenario the teacher plans with (None: ``scenario``); it must
             observe as ``scenario`` does (e.g. its J_i alone differs).
+        shield: the learner acts behind the safety shield
+            (:class:`~uav_formation_env.policies.shield.SafetyShield`), so that the episodes
+            visit the states the shielded learner leads to; the labels stay the teacher's.
 
     Returns:
         ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m], clearance (M,) [m])``
@@ -64,8 +69,7 @@ def collect(
         from the UAV to its nearest other UAV, ``clearance`` to the nearest obstacle surface
         (inf without obstacles).
     """
-    if isinstance(learner, (str, Path)):
-        learner = make_policy(str(learner), scenario)
+    learner = _learner(learner, scenario, shield)
     steps = scenario.n_steps if n_steps is None else min(n_steps, scenario.n_steps)
     by_seed: dict[int, Samples] = {}
     for n_uav, group in seeds_by_n_uav(scenario, list(seeds)).items():
@@ -104,6 +108,15 @@ def collect(
     return tuple(  # type: ignore[return-value]
         np.concatenate([by_seed[s][i] for s in seeds]) for i in range(4)
     )
+
+
+def _learner(learner: Any | str | Path | None, scenario: Scenario, shield: bool) -> Any:
+    """The learner as a policy: loaded if a path, behind the safety shield if ``shield``."""
+    if isinstance(learner, (str, Path)):
+        learner = make_policy(str(learner), scenario)
+    if learner is not None and shield:
+        learner = SafetyShield(learner, scenario)
+    return learner
 
 
 def _one_thread_each() -> None:
@@ -151,10 +164,12 @@ def collect_in_workers(
     return tuple(np.concatenate([r[i] for r in results]) for i in range(4))  # type: ignore[return-value]
 
 
-def fly(scenario: Scenario, learner: str | Path, seeds: Sequence[int]) -> list[EpisodeBatch]:
-    """The saved policy at ``learner`` flies ``seeds`` through the project's runner (one batch per
-    group of equal N)."""
-    return run_episode_groups(scenario, make_policy(str(learner), scenario), list(seeds))
+def fly(
+    scenario: Scenario, learner: str | Path, seeds: Sequence[int], shield: bool = False
+) -> list[EpisodeBatch]:
+    """The saved policy at ``learner`` (behind the safety shield if ``shield``) flies ``seeds``
+    through the project's runner (one batch per group of equal N)."""
+    return run_episode_groups(scenario, _learner(learner, scenario, shield), list(seeds))
 
 
 def fly_in_workers(
@@ -163,6 +178,7 @@ def fly_in_workers(
     scenario: Scenario,
     learner: str | Path,
     seeds: Sequence[int],
+    shield: bool = False,
 ) -> list[EpisodeBatch]:
     """:func:`fly` with the seeds split into ``workers`` chunks over ``pool``; the batches of
     every chunk, in the order of the seeds. A learner's batched matrix products round
@@ -170,6 +186,6 @@ def fly_in_workers(
     single batch by that rounding (float32) and whatever the closed loop makes of it."""
     chunks = _chunks(seeds, workers)
     if pool is None or len(chunks) < 2:
-        return fly(scenario, learner, seeds)
-    parts = [pool.submit(fly, scenario, learner, chunk) for chunk in chunks]
+        return fly(scenario, learner, seeds, shield)
+    parts = [pool.submit(fly, scenario, learner, chunk, shield) for chunk in chunks]
     return [batch for part in parts for batch in part.result()]

@@ -27,12 +27,14 @@ def validation_scores(
     seeds: list[int],
     pool: Any = None,
     workers: int = 1,
+    shield: bool = False,
 ) -> dict[str, Any]:
-    """A round's validation: the saved policy ``learner`` flies ``seeds`` (grouped by N, split
-    over the ``workers`` of ``pool`` if given) through the project's runner; missions completed,
+    """A round's validation: the saved policy ``learner`` (behind the safety shield if
+    ``shield``) flies ``seeds`` (grouped by N, split over the ``workers`` of ``pool`` if given)
+    through the project's runner; missions completed,
     episodes, realised J per UAV, route error max [m] and colliding UAV-steps, as
     ``validation_*`` columns."""
-    summary = summarise_groups(fly_in_workers(pool, workers, scenario, learner, seeds))
+    summary = summarise_groups(fly_in_workers(pool, workers, scenario, learner, seeds, shield))
     mission = summary["mission"]
     return {
         "validation_completed": mission["completed"],
@@ -97,12 +99,14 @@ def select_round(
     start = start if validation_seed_start is None else int(validation_seed_start)
     scen = load_scenario(out / "scenario.yaml")
     seeds = list(range(start, start + validation_seeds))
+    shield = bool(record["config"].get("shield", False))  # as the run's rounds were scored
     rows = []
     pool = worker_pool(workers)
     try:
         for r in sorted(int(p.name) for p in (out / "rounds").iterdir() if p.name.isdigit()):
             learner = out / "rounds" / str(r) / "policy.pt"
-            rows.append({"round": r, **validation_scores(scen, learner, seeds, pool, workers)})
+            scores = validation_scores(scen, learner, seeds, pool, workers, shield)
+            rows.append({"round": r, **scores})
     finally:
         if pool is not None:
             pool.shutdown()

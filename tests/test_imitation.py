@@ -34,6 +34,7 @@ from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa
 from uav_formation_env.episode import FormationEpisodes  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
 from uav_formation_env.policies.dmpc import NashDMPCPolicy  # noqa: E402
+from uav_formation_env.policies.shield import SafetyShield  # noqa: E402
 
 SHORT = with_overrides(resolve_scenario("paper"), {"duration": 2.0})  # 10 steps
 
@@ -107,6 +108,32 @@ def test_learner_rollout_follows_the_learner_and_is_labelled_by_the_teacher() ->
         np.testing.assert_array_equal(obs[k * 5 : (k + 1) * 5], step.observation[0])
         step = episodes.step(np.zeros((1, 5, 3)))  # the learner's action was executed
     assert np.abs(labels).max() > 0.01  # labels are the teacher's, not the learner's zeros
+
+
+class TowardsNeighbour:
+    """Every UAV accelerates flat out at the UAV in its first slot (local layout)."""
+
+    def act_batch(self, obs: np.ndarray) -> np.ndarray:
+        towards = obs[..., 21:24].astype(float)  # slot 0's p_j - p_i, scaled
+        return towards / np.maximum(np.linalg.norm(towards, axis=-1, keepdims=True), 1e-9)
+
+
+def test_shielded_learner_rollout_visits_the_shielded_states() -> None:
+    local = with_overrides(SHORT, {"observation": {"kind": "local"}})
+    settings = {"learner": TowardsNeighbour(), "teacher_probability": 0.0}
+    obs, labels, _, _ = collect(local, "exact", [3], shield=True, **settings)
+    plain_obs, plain_labels, _, _ = collect(local, "exact", [3], **settings)
+    shielded = SafetyShield(TowardsNeighbour(), local)
+    episodes = FormationEpisodes(local, 1, fly_on_after_collision=True)
+    step = episodes.reset(seed=[3])
+    for k in range(10):
+        np.testing.assert_array_equal(obs[k * 5 : (k + 1) * 5], step.observation[0])
+        step = episodes.step(shielded.act_batch(step.observation))
+    assert shielded.interventions > 0  # the shield acted, and the episode is not the plain one
+    assert not np.array_equal(obs, plain_obs)
+    assert np.abs(labels).max() > 0.01  # the teacher's labels, as without the shield
+    with pytest.raises(ValueError, match="shield must be true or false"):
+        tiny_config(shield="yes")
 
 
 def test_teacher_cost_changes_the_teachers_labels_only() -> None:
