@@ -21,8 +21,9 @@ barrier is one half-space ``g · u_n >= β`` per UAV:
   ``β = -v_t² / ρ - 2 α ḣ - α² h`` with ``v_t`` the horizontal speed across g;
 - the UAV j in slot s (distance ρ, relative state from :func:`~uav_formation_env.core.
   local_observation.slot_frame`): ``h = ρ - (collision.uav_distance + separation_margin)``,
-  ``g = (p_i - p_j) / ρ``, and UAV i takes half of the relative acceleration's bound (j, seeing
-  i, takes the other half; the usual decentralised split).
+  ``g = (p_i - p_j) / ρ``; the bound is on the relative acceleration beyond the policy's own
+  (which moves a formation as a whole), and UAV i makes half of that correction (j, seeing i,
+  the other half; the usual decentralised split).
 
 **Projection**: where the policy's action meets every barrier it is passed on unchanged;
 elsewhere the shield solves ``min ||x - x_policy||²`` subject to the barriers and the box
@@ -130,6 +131,9 @@ def barrier_halfspaces(
 
     Args:
         decoded: (B, N, ...) decoded local observations.
+        actions: (B, N, 3) the policy's normalised actions, as the plant will apply them (the
+            UAV rows bound the change from them) [-].
+        u_max: per-axis actuator bound [m/s^2].
         uav_distance: two UAVs closer than this collide [m].
         config: margins and gain.
 
