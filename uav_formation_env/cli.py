@@ -18,10 +18,9 @@ A user error (a bad argument, a missing file, an invalid scenario) prints one li
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -224,7 +223,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     summary = json_ready(summarise_groups(batches))
     if args.shield:
         summary["shield"] = {
-            "config": dataclasses.asdict(policy.config),
+            "config": asdict(policy.config),
             "intervention_rate": policy.intervention_rate,
         }
     records = []
