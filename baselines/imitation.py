@@ -110,6 +110,12 @@ class ImitationConfig:
         obstacle_margin: the steps of a UAV nearer than this to an obstacle's surface are
             weighted ``proximity_weight`` too (0: only the UAV-UAV rule) [m]. Clones that
             failed a mission by a step inside an obstacle grazed it while avoiding.
+        contact_time: the steps of a UAV that would reach an obstacle's surface within this
+            time at its present closing speed (:func:`~uav_formation_baselines.imitation_data.
+            contact_time`) are weighted ``proximity_weight`` too (0: off) [s]. The
+            ``random_fields`` clones' obstacle collisions begin where the avoidance reference
+            turns while the UAV still closes at ~20 m/s some 50 m away (2-3 s): there the
+            teacher brakes at full thrust and the clone follows the turning reference.
         validation_seeds: validation episodes per round [-].
         seed_start, validation_seed_start: first training / validation episode seed.
         overrides: scenario field overrides (e.g. ``{observation: {kind: local}}``).
@@ -141,6 +147,7 @@ class ImitationConfig:
     masked_slots: tuple[int, ...] = ()
     proximity_weight: float = 1.0
     obstacle_margin: float = 0.0
+    contact_time: float = 0.0
     validation_seeds: int = 4
     seed_start: int = 10_000
     validation_seed_start: int = 5_000
@@ -177,6 +184,8 @@ class ImitationConfig:
             raise ValueError(f"proximity_weight must be >= 1, got {self.proximity_weight!r}")
         if not self.obstacle_margin >= 0:
             raise ValueError(f"obstacle_margin must be >= 0 [m], got {self.obstacle_margin!r}")
+        if not self.contact_time >= 0:
+            raise ValueError(f"contact_time must be >= 0 [s], got {self.contact_time!r}")
         if not isinstance(self.shield, bool):
             raise ValueError(f"shield must be true or false, got {self.shield!r}")
         if not self.learning_rate > 0:
@@ -234,12 +243,20 @@ def teacher_scenario(scenario: Scenario, config: ImitationConfig) -> Scenario:
 
 
 def sample_weights(
-    nearest: np.ndarray, clearance: np.ndarray, scenario: Scenario, config: ImitationConfig
+    nearest: np.ndarray,
+    clearance: np.ndarray,
+    contact: np.ndarray,
+    scenario: Scenario,
+    config: ImitationConfig,
 ) -> np.ndarray:
     """(M,) loss weights: ``config.proximity_weight`` where another UAV is nearer than the
-    separation distance d_s or an obstacle's surface nearer than ``config.obstacle_margin``,
-    else 1."""
-    close = (nearest < scenario.cost.separation_distance) | (clearance < config.obstacle_margin)
+    separation distance d_s, an obstacle's surface nearer than ``config.obstacle_margin`` [m]
+    or reached sooner than ``config.contact_time`` [s] (``contact``, (M,) [s]), else 1."""
+    close = (
+        (nearest < scenario.cost.separation_distance)
+        | (clearance < config.obstacle_margin)
+        | (contact < config.contact_time)
+    )
     return np.where(close, config.proximity_weight, 1.0)
 
 
@@ -374,7 +391,7 @@ def _train(
                 (start_steps, base + 50_000 + r * config.start_episodes, config.start_episodes)
             )
         for part, (steps, first, count) in enumerate(parts):
-            obs, actions, nearest, clearance = collect_in_workers(
+            obs, actions, nearest, clearance, contact = collect_in_workers(
                 pool,
                 workers,
                 list(range(first, first + count)),
@@ -390,7 +407,7 @@ def _train(
             )
             all_obs.append(obs)
             all_actions.append(actions)
-            all_weights.append(sample_weights(nearest, clearance, scen, config))
+            all_weights.append(sample_weights(nearest, clearance, contact, scen, config))
         data_obs, data_actions = np.concatenate(all_obs), np.concatenate(all_actions)
         if model is None:  # normalise by the teacher's own state distribution, fixed afterwards
             model = NormalisedMLP(

@@ -27,10 +27,12 @@ from uav_formation_baselines.imitation import (  # noqa: E402
 )
 from uav_formation_baselines.imitation_data import (  # noqa: E402
     collect_in_workers,
+    contact_time,
     worker_pool,
 )
 from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
 from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
+from uav_formation_env.core.obstacles import ObstacleField  # noqa: E402
 from uav_formation_env.episode import FormationEpisodes  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
 from uav_formation_env.policies.dmpc import NashDMPCPolicy  # noqa: E402
@@ -82,26 +84,32 @@ def test_every_section_of_the_shipped_files_configures_its_scenario(name: str) -
 
 
 def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
-    obs, labels, nearest, clearance = collect(SHORT, "exact", [3, 4])
-    assert nearest.shape == clearance.shape == (10 * 2 * 5,) and nearest.min() > 0
+    obs, labels, nearest, clearance, contact = collect(SHORT, "exact", [3, 4])
+    assert nearest.shape == clearance.shape == contact.shape == (10 * 2 * 5,)
+    assert nearest.min() > 0
     assert obs.shape == (10 * 2 * 5, 47) and labels.shape == (10 * 2 * 5, 3)
     # the same teacher, flown on its own, sees the same observations and acts the same
     episodes = FormationEpisodes(SHORT, 2, fly_on_after_collision=True)
     teacher = NashDMPCPolicy(SHORT, "exact", threshold=0.0)
     teacher.reset(2, seeds=[3, 4])
     step = episodes.reset(seed=[3, 4])
-    by_episode = [a.reshape(2, 10, 5, *a.shape[1:]) for a in (obs, labels, nearest, clearance)]
+    by_episode = [
+        a.reshape(2, 10, 5, *a.shape[1:]) for a in (obs, labels, nearest, clearance, contact)
+    ]
     for k in range(10):  # samples come episode by episode, then step, then UAV
         action = teacher.act_batch(step.observation)
         np.testing.assert_array_equal(by_episode[0][:, k], step.observation)
         np.testing.assert_allclose(by_episode[1][:, k], action, atol=1e-6)
         np.testing.assert_array_equal(by_episode[2][:, k], step.result.min_separation)
         np.testing.assert_array_equal(by_episode[3][:, k], step.result.obstacle_distance)
+        np.testing.assert_array_equal(
+            by_episode[4][:, k], contact_time(step.result.z, episodes.sim.field)
+        )
         step = episodes.step(action)
 
 
 def test_learner_rollout_follows_the_learner_and_is_labelled_by_the_teacher() -> None:
-    obs, labels, _, _ = collect(SHORT, "exact", [3], learner=ZeroPolicy(), teacher_probability=0.0)
+    obs, labels, *_ = collect(SHORT, "exact", [3], learner=ZeroPolicy(), teacher_probability=0.0)
     episodes = FormationEpisodes(SHORT, 1, fly_on_after_collision=True)
     step = episodes.reset(seed=[3])
     for k in range(3):
@@ -121,8 +129,8 @@ class TowardsNeighbour:
 def test_shielded_learner_rollout_visits_the_shielded_states() -> None:
     local = with_overrides(SHORT, {"observation": {"kind": "local"}})
     settings = {"learner": TowardsNeighbour(), "teacher_probability": 0.0}
-    obs, labels, _, _ = collect(local, "exact", [3], shield=True, **settings)
-    plain_obs, plain_labels, _, _ = collect(local, "exact", [3], **settings)
+    obs, labels, *_ = collect(local, "exact", [3], shield=True, **settings)
+    plain_obs, plain_labels, *_ = collect(local, "exact", [3], **settings)
     shielded = SafetyShield(TowardsNeighbour(), local)
     episodes = FormationEpisodes(local, 1, fly_on_after_collision=True)
     step = episodes.reset(seed=[3])
@@ -141,8 +149,8 @@ def test_teacher_cost_changes_the_teachers_labels_only() -> None:
     planner = teacher_scenario(SHORT, config)
     assert planner.cost.n == 40.0 and SHORT.cost.n == 10.0
     assert teacher_scenario(SHORT, ImitationConfig()) is SHORT
-    obs, labels, _, _ = collect(SHORT, "exact", [3], teacher_scenario=planner)
-    plain_obs, plain_labels, _, _ = collect(SHORT, "exact", [3])
+    obs, labels, *_ = collect(SHORT, "exact", [3], teacher_scenario=planner)
+    plain_obs, plain_labels, *_ = collect(SHORT, "exact", [3])
     # the first step's observation is the environment's either way; its label is the override's
     np.testing.assert_array_equal(obs[:5], plain_obs[:5])
     assert np.abs(labels[:5] - plain_labels[:5]).max() > 1e-3
@@ -193,14 +201,40 @@ def test_fit_learns_a_feedback_law() -> None:
 
 
 def test_sample_weights_mark_close_uavs_and_obstacles() -> None:
-    nearest = np.array([5.0, 15.0, 15.0, 15.0])  # d_s = 10 m
-    clearance = np.array([50.0, 50.0, 3.0, np.inf])
+    nearest = np.array([5.0, 15.0, 15.0, 15.0, 15.0])  # d_s = 10 m
+    clearance = np.array([50.0, 50.0, 3.0, np.inf, 50.0])
+    contact = np.array([9.0, 9.0, 9.0, np.inf, 2.0])  # [s]
     config = ImitationConfig(proximity_weight=20.0, obstacle_margin=5.0)
     np.testing.assert_array_equal(
-        sample_weights(nearest, clearance, SHORT, config), [20.0, 1.0, 20.0, 1.0]
+        sample_weights(nearest, clearance, contact, SHORT, config), [20, 1, 20, 1, 1]
     )
-    off = ImitationConfig(proximity_weight=20.0)  # margin 0: only UAVs count
-    np.testing.assert_array_equal(sample_weights(nearest, clearance, SHORT, off), [20, 1, 1, 1])
+    off = ImitationConfig(proximity_weight=20.0)  # margin 0, no contact time: only UAVs count
+    np.testing.assert_array_equal(
+        sample_weights(nearest, clearance, contact, SHORT, off), [20, 1, 1, 1, 1]
+    )
+    closing = ImitationConfig(proximity_weight=20.0, contact_time=3.0)
+    np.testing.assert_array_equal(
+        sample_weights(nearest, clearance, contact, SHORT, closing), [20, 1, 1, 1, 20]
+    )
+
+
+def test_contact_time_is_the_surface_distance_over_the_closing_speed() -> None:
+    # obstacle 0 at (100, 0), radius 20; obstacle 1 at (0, 100), radius 10; a padding obstacle
+    # at the UAVs' own position, which must never count
+    field = ObstacleField(
+        centres=np.array([[[100.0, 0.0], [0.0, 100.0], [0.0, 0.0]]]),
+        radii=np.array([[20.0, 10.0, 1.0]]),
+        r_safe=np.array([[25.0, 15.0, 1.0]]),
+        r_detect=np.array([[50.0, 40.0, 1.0]]),
+        present=np.array([[True, True, False]]),
+    )
+    z = np.zeros((1, 4, 6))
+    z[0, 0, 3:5] = [20.0, 0.0]  # head-on to obstacle 0: 80 m at 20 m/s
+    z[0, 1, 3:5] = [10.0, 10.0]  # 80 m at 10 m/s to obstacle 0, 90 m at 10 m/s to obstacle 1
+    z[0, 2, 3:5] = [-5.0, -5.0]  # closes on neither
+    z[0, 3, :2] = [95.0, 0.0]  # inside obstacle 0, at rest
+    expected = [80.0 / 20.0, 80.0 / 10.0, np.inf, 0.0]
+    np.testing.assert_allclose(contact_time(z, field)[0], expected)
 
 
 def test_fit_weights_decide_between_contradicting_labels() -> None:
