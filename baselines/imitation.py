@@ -115,7 +115,9 @@ class ImitationConfig:
             contact_time`) are weighted ``proximity_weight`` too (0: off) [s]. The
             ``random_fields`` clones' obstacle collisions begin where the avoidance reference
             turns while the UAV still closes at ~20 m/s some 50 m away (2-3 s): there the
-            teacher brakes at full thrust and the clone follows the turning reference.
+            teacher brakes at full thrust and the clone follows the turning reference. One
+            ``random_fields`` recipe run with 3 s did not complete more scenes (RESULTS.md,
+            "Where the collisions start").
         validation_seeds: validation episodes per round [-].
         seed_start, validation_seed_start: first training / validation episode seed.
         overrides: scenario field overrides (e.g. ``{observation: {kind: local}}``).
