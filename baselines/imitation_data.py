@@ -129,7 +129,7 @@ def collect(
                 part[copy].reshape(steps * n_uav, *part.shape[3:]) for part in stacked
             )
     return tuple(  # type: ignore[return-value]
-        np.concatenate([by_seed[s][i] for s in seeds]) for i in range(5)
+        np.concatenate(column) for column in zip(*(by_seed[s] for s in seeds))
     )
 
 
@@ -184,7 +184,7 @@ def collect_in_workers(
         return collect(seeds=list(seeds), **settings)
     parts = [pool.submit(collect, seeds=chunk, **settings) for chunk in chunks]
     results = [part.result() for part in parts]
-    return tuple(np.concatenate([r[i] for r in results]) for i in range(5))  # type: ignore[return-value]
+    return tuple(np.concatenate(column) for column in zip(*results))  # type: ignore[return-value]
 
 
 def fly(
