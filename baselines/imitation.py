@@ -52,7 +52,12 @@ from uav_formation_baselines.imitation_select import (
     validation_scores,
     write_rows,
 )
-from uav_formation_baselines.torch_policy import ACTIVATIONS, NormalisedMLP, save_policy
+from uav_formation_baselines.torch_policy import (
+    ACTIVATIONS,
+    ApproachFeatures,
+    NormalisedMLP,
+    save_policy,
+)
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config import CostConfig, Scenario
 from uav_formation_env.config_io import (
@@ -64,6 +69,7 @@ from uav_formation_env.policies import DMPC_OPTIMIZERS
 
 __all__ = [
     "ImitationConfig",
+    "approach_features",
     "best_round",
     "collect",
     "config_section",
@@ -127,6 +133,12 @@ class ImitationConfig:
             teacher's grazing pass into a collision: on the 20 paper seeds the exact teacher
             passes O1 (radius 30 m) 31.5 m from its centre at the closest, and 39.2 m with the
             clearance term, at a lower paper J (6.55e5 against 7.35e5).
+        approach_features: the MLP also reads each obstacle's closing speed, the reference's,
+            and the deceleration that would stop the UAV at its surface
+            (:class:`~uav_formation_baselines.torch_policy.ApproachFeatures`; local layout
+            only): where the teacher brakes for an obstacle the avoidance reference turns
+            towards, these decide, and a tanh MLP must otherwise build them from products of
+            slots.
         shield: the learner flies its DAgger episodes and its validation behind the safety
             shield (:class:`~uav_formation_env.policies.shield.SafetyShield`, local layout
             only): it learns the teacher's answer in the states the shield leads to, and is
@@ -155,6 +167,7 @@ class ImitationConfig:
     validation_seed_start: int = 5_000
     overrides: dict[str, Any] = field(default_factory=dict)
     teacher_cost: dict[str, Any] = field(default_factory=dict)
+    approach_features: bool = False
     shield: bool = False
 
     def __post_init__(self) -> None:
@@ -188,8 +201,9 @@ class ImitationConfig:
             raise ValueError(f"obstacle_margin must be >= 0 [m], got {self.obstacle_margin!r}")
         if not self.contact_time >= 0:
             raise ValueError(f"contact_time must be >= 0 [s], got {self.contact_time!r}")
-        if not isinstance(self.shield, bool):
-            raise ValueError(f"shield must be true or false, got {self.shield!r}")
+        for name in ("shield", "approach_features"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
         if self.duration is not None and not self.duration > 0:
@@ -260,6 +274,20 @@ def sample_weights(
         | (contact < config.contact_time)
     )
     return np.where(close, config.proximity_weight, 1.0)
+
+
+def approach_features(scenario: Scenario, config: ImitationConfig) -> ApproachFeatures | None:
+    """The :class:`ApproachFeatures` of ``scenario``'s local layout if
+    ``config.approach_features``, else None; a ``ValueError`` if the layout is not local."""
+    if not config.approach_features:
+        return None
+    observation = scenario.observation
+    if observation.kind != "local":
+        raise ValueError(
+            "approach_features needs the local observation (overrides: {observation: {kind: "
+            f"local}}), the scenario has {observation.kind!r}"
+        )
+    return ApproachFeatures(observation.neighbours, observation.obstacles, observation.nearest)
 
 
 def fit(
@@ -370,6 +398,7 @@ def _train(
     if config.duration is not None:
         patch["duration"] = float(config.duration)
     scen = with_overrides(scen, patch) if patch else scen
+    features = approach_features(scen, config)  # checks the layout before anything is written
     out = Path(out)
     (out / "rounds").mkdir(parents=True, exist_ok=True)
     save_scenario(scen, out / "scenario.yaml")
@@ -412,12 +441,18 @@ def _train(
             all_weights.append(sample_weights(nearest, clearance, contact, scen, config))
         data_obs, data_actions = np.concatenate(all_obs), np.concatenate(all_actions)
         if model is None:  # normalise by the teacher's own state distribution, fixed afterwards
+            inputs = data_obs
+            if features is not None:
+                with torch.no_grad():
+                    extra = features(torch.as_tensor(data_obs)).numpy()
+                inputs = np.concatenate((data_obs, extra), axis=1)
             model = NormalisedMLP(
-                data_obs.mean(axis=0),
-                data_obs.std(axis=0),
+                inputs.mean(axis=0),
+                inputs.std(axis=0),
                 config.hidden,
                 config.activation,
                 masked_slots=config.masked_slots,
+                features=features,
             )
         loss = fit(
             model,

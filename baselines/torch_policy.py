@@ -14,6 +14,7 @@ numbers as the module on sample observations.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -21,7 +22,11 @@ import numpy as np
 import torch
 from torch import nn
 
-__all__ = ["ACTIVATIONS", "MeanEnsemble", "NormalisedMLP", "save_policy"]
+from uav_formation_env.core.local_observation import decode_local_observations
+
+__all__ = ["ACTIVATIONS", "ApproachFeatures", "MeanEnsemble", "NormalisedMLP", "save_policy"]
+
+BRAKING_CLIP = 100.0  # [m/s^2]: a UAV at or inside a surface needs "more than any thrust"
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {
     "tanh": nn.Tanh,
@@ -30,6 +35,47 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {
     "gelu": nn.GELU,
     "silu": nn.SiLU,
 }
+
+
+class ApproachFeatures(nn.Module):
+    """How fast each UAV approaches each obstacle of its local observation, and the braking it
+    would need: values the network would otherwise have to build from products of slots.
+
+    Per obstacle slot q (horizontal plane; an empty slot, all zeros, gives zeros):
+
+    - the closing speed v . c_q [m/s], c_q the unit vector from the UAV to the obstacle's centre,
+    - the reference's closing speed v^d . c_q [m/s],
+    - the deceleration that stops the closing motion at the surface, max(v . c_q, 0)^2 / (2 g_q)
+      [m/s^2] (g_q the distance to the surface, floored at 1 m; clipped at
+      :data:`BRAKING_CLIP`).
+
+    Args:
+        neighbours, obstacles, nearest: the local layout's k, m and r
+            (:mod:`uav_formation_env.core.local_observation`).
+    """
+
+    def __init__(self, neighbours: int, obstacles: int, nearest: int) -> None:
+        super().__init__()
+        self.layout = (int(neighbours), int(obstacles), int(nearest))
+        self.size = 3 * int(obstacles)
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """(M, dim) local observations -> (M, 3 m) float32 features, slot by slot."""
+        with warnings.catch_warnings():
+            # decode's check of the last axis reads a shape: a constant of the trace, which is
+            # right (the layout is fixed); save_policy verifies the file on another batch size
+            warnings.simplefilter("ignore", torch.jit.TracerWarning)
+            decoded = decode_local_observations(obs, *self.layout)
+        relative = decoded.obstacle_relative  # (M, m, 2) [m]
+        towards = relative / torch.linalg.vector_norm(relative, dim=-1, keepdim=True).clamp_min(
+            1e-6
+        )
+        closing = (decoded.velocity[..., None, :2] * towards).sum(dim=-1)  # (M, m) [m/s]
+        reference = (decoded.reference_velocity[..., None, :2] * towards).sum(dim=-1)
+        gap = decoded.obstacle_surface.clamp_min(1.0)  # [m]
+        braking = (torch.relu(closing) ** 2 / (2.0 * gap)).clamp_max(BRAKING_CLIP)
+        features = torch.stack((closing, reference, braking), dim=-1)  # 0 in an empty slot
+        return features.reshape(*features.shape[:-2], self.size).float()
 
 
 class NormalisedMLP(nn.Module):
@@ -43,6 +89,9 @@ class NormalisedMLP(nn.Module):
         log_std: the exported log standard deviation of the action (unused by deterministic
             evaluation; kept so the file has the TorchScript policy contract).
         masked_slots: observation slots the network never sees (set to 0 after standardising).
+        features: a module (M, dim) -> (M, F) whose values are appended to the observation
+            before standardising (e.g. :class:`ApproachFeatures`); ``obs_mean`` and ``obs_std``
+            are then (dim + F,), the statistics of :meth:`inputs`.
     """
 
     def __init__(
@@ -53,8 +102,10 @@ class NormalisedMLP(nn.Module):
         activation: str = "tanh",
         log_std: float = -2.0,
         masked_slots: Sequence[int] = (),
+        features: nn.Module | None = None,
     ) -> None:
         super().__init__()
+        self.features = features
         if activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}")
         mean = torch.as_tensor(np.asarray(obs_mean, dtype=np.float32))
@@ -80,9 +131,15 @@ class NormalisedMLP(nn.Module):
         self.net = nn.Sequential(*layers)
         self.log_std = nn.Parameter(torch.full((3,), float(log_std)), requires_grad=False)
 
+    def inputs(self, obs: torch.Tensor) -> torch.Tensor:
+        """(M, dim) observations -> (M, dim + F): with the ``features`` appended, unscaled."""
+        if self.features is None:
+            return obs
+        return torch.cat((obs, self.features(obs)), dim=-1)
+
     def mean_action(self, obs: torch.Tensor) -> torch.Tensor:
         """(M, dim) observations -> (M, 3) mean normalised action (unclipped)."""
-        return self.net((obs - self.obs_mean) / self.obs_std * self.input_mask)
+        return self.net((self.inputs(obs) - self.obs_mean) / self.obs_std * self.input_mask)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         """(M, dim) observations -> (M, 6): mean action and log-std."""

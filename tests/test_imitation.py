@@ -15,6 +15,7 @@ torch = pytest.importorskip("torch")
 from uav_formation_baselines import HYPERPARAMS_DIR  # noqa: E402
 from uav_formation_baselines.imitation import (  # noqa: E402
     ImitationConfig,
+    approach_features,
     best_round,
     collect,
     fit,
@@ -30,7 +31,11 @@ from uav_formation_baselines.imitation_data import (  # noqa: E402
     contact_time,
     worker_pool,
 )
-from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
+from uav_formation_baselines.torch_policy import (  # noqa: E402
+    ApproachFeatures,
+    NormalisedMLP,
+    save_policy,
+)
 from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
 from uav_formation_env.core.obstacles import ObstacleField  # noqa: E402
 from uav_formation_env.episode import FormationEpisodes  # noqa: E402
@@ -263,6 +268,82 @@ def test_train_writes_a_loadable_policy(tmp_path: Path) -> None:
     assert len(rows) == 3 and rows[0].startswith("round,samples,close_fraction,loss")
     policy = make_policy(str(tmp_path / "policy.pt"), SHORT)
     actions = policy.act_batch(np.zeros((1, 5, 47), dtype=np.float32))
+    assert actions.shape == (1, 5, 3)
+
+
+def local_observation(velocity, reference, obstacle) -> np.ndarray:
+    """(95,) a local observation (k = 4, r = 2, m = 2) by hand, from its slots' scales: own and
+    reference velocity [m/s], obstacle slot 0 as (centre x, centre y, radius, surface) relative
+    [m] or None; every other slot empty."""
+    obs = np.zeros(95, dtype=np.float32)
+    obs[0:3] = np.asarray(velocity) / 20.0
+    obs[6:9] = np.asarray(reference) / 20.0
+    if obstacle is not None:
+        obs[85:90] = [1.0, *(np.asarray(obstacle) / 100.0)]
+    return obs
+
+
+def test_approach_features_are_closing_speeds_and_the_braking_needed() -> None:
+    obs = np.stack(
+        [
+            # centre 100 m away along (0.6, 0.8), surface 70 m: closing 20 * 0.6 = 12 m/s, the
+            # reference's 10 * 0.6 + 10 * 0.8 = 14 m/s, braking 12^2 / (2 * 70) m/s^2
+            local_observation([20, 0, 3], [10, 10, 0], [60, 80, 30, 70]),
+            # moving away: closing -20 m/s, no braking
+            local_observation([20, 0, 0], [10, 0, 0], [-100, 0, 50, 50]),
+            # 5 m inside the surface, closing at 20 m/s: the gap floors at 1 m, braking clipped
+            local_observation([20, 0, 0], [0, 0, 0], [10, 0, 15, -5]),
+            local_observation([20, 0, 0], [10, 0, 0], None),  # no obstacle in view
+        ]
+    )
+    features = ApproachFeatures(4, 2, 2)(torch.as_tensor(obs)).numpy()
+    expected = np.zeros((4, 6))
+    expected[0, :3] = [12.0, 14.0, 144.0 / 140.0]
+    expected[1, :3] = [-20.0, -10.0, 0.0]
+    expected[2, :3] = [20.0, 0.0, 100.0]
+    np.testing.assert_allclose(features, expected, rtol=1e-5, atol=1e-5)
+
+
+def test_approach_features_enter_the_exported_policy(tmp_path: Path) -> None:
+    rng = np.random.default_rng(2)
+    sample = np.stack(
+        [local_observation(rng.normal(0, 10, 3), rng.normal(0, 10, 3), [50, 0, 20, 30])] * 8
+    )
+    sample[:, 19:85] = rng.normal(size=(8, 66))
+    features = ApproachFeatures(4, 2, 2)
+    model = NormalisedMLP(np.zeros(101), np.ones(101), (16,), "tanh", features=features)
+    path = save_policy(model, tmp_path / "policy.pt", sample)
+    loaded = torch.jit.load(str(path))
+    obs = torch.as_tensor(sample)
+    with torch.no_grad():
+        by_hand = model.net(torch.cat((obs, features(obs)), dim=-1))  # mean 0, std 1
+        torch.testing.assert_close(loaded(obs)[:, :3], by_hand)
+        assert features(obs).abs().max() > 0.1  # the features are not all zero here
+
+
+def test_approach_features_need_the_local_layout(tmp_path: Path) -> None:
+    config = tiny_config(approach_features=True)
+    with pytest.raises(ValueError, match="approach_features needs the local observation"):
+        train_imitation("paper", tmp_path / "run", config, progress=False)
+    assert not (tmp_path / "run").exists()
+    local = with_overrides(SHORT, {"observation": {"kind": "local"}})
+    assert approach_features(local, config).size == 6
+    assert approach_features(local, tiny_config()) is None
+    with pytest.raises(ValueError, match="approach_features must be true or false"):
+        ImitationConfig(approach_features="yes")
+
+
+def test_train_with_approach_features_writes_a_loadable_policy(tmp_path: Path) -> None:
+    config = tiny_config(
+        rounds=1, episodes=1, approach_features=True, overrides={"observation": {"kind": "local"}}
+    )
+    train_imitation("paper", tmp_path, config, seed=0, progress=False)
+    model = torch.jit.load(str(tmp_path / "policy.pt"))
+    assert model.obs_mean.shape == (101,)  # 95 slots and 3 features per obstacle slot
+    local = with_overrides(SHORT, {"observation": {"kind": "local"}})
+    actions = make_policy(str(tmp_path / "policy.pt"), local).act_batch(
+        np.zeros((1, 5, 95), dtype=np.float32)
+    )
     assert actions.shape == (1, 5, 3)
 
 
