@@ -138,7 +138,8 @@ class ImitationConfig:
             (:class:`~uav_formation_baselines.torch_policy.ApproachFeatures`; local layout
             only): where the teacher brakes for an obstacle the avoidance reference turns
             towards, these decide, and a tanh MLP must otherwise build them from products of
-            slots.
+            slots. One ``random_fields`` recipe run with them did not complete more scenes
+            (RESULTS.md, "The obstacle approach as inputs").
         shield: the learner flies its DAgger episodes and its validation behind the safety
             shield (:class:`~uav_formation_env.policies.shield.SafetyShield`, local layout
             only): it learns the teacher's answer in the states the shield leads to, and is
