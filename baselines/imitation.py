@@ -57,6 +57,7 @@ from uav_formation_baselines.torch_policy import (
     ApproachFeatures,
     NormalisedMLP,
     save_policy,
+    with_features,
 )
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config import CostConfig, Scenario
@@ -442,11 +443,8 @@ def _train(
             all_weights.append(sample_weights(nearest, clearance, contact, scen, config))
         data_obs, data_actions = np.concatenate(all_obs), np.concatenate(all_actions)
         if model is None:  # normalise by the teacher's own state distribution, fixed afterwards
-            inputs = data_obs
-            if features is not None:
-                with torch.no_grad():
-                    extra = features(torch.as_tensor(data_obs)).numpy()
-                inputs = np.concatenate((data_obs, extra), axis=1)
+            with torch.no_grad():
+                inputs = with_features(torch.as_tensor(data_obs), features).numpy()
             model = NormalisedMLP(
                 inputs.mean(axis=0),
                 inputs.std(axis=0),

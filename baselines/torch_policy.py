@@ -24,7 +24,14 @@ from torch import nn
 
 from uav_formation_env.core.local_observation import decode_local_observations
 
-__all__ = ["ACTIVATIONS", "ApproachFeatures", "MeanEnsemble", "NormalisedMLP", "save_policy"]
+__all__ = [
+    "ACTIVATIONS",
+    "ApproachFeatures",
+    "MeanEnsemble",
+    "NormalisedMLP",
+    "save_policy",
+    "with_features",
+]
 
 BRAKING_CLIP = 100.0  # [m/s^2]: a UAV at or inside a surface needs "more than any thrust"
 
@@ -76,6 +83,12 @@ class ApproachFeatures(nn.Module):
         braking = (torch.relu(closing) ** 2 / (2.0 * gap)).clamp_max(BRAKING_CLIP)
         features = torch.stack((closing, reference, braking), dim=-1)  # 0 in an empty slot
         return features.reshape(*features.shape[:-2], self.size).float()
+
+
+def with_features(obs: torch.Tensor, features: nn.Module | None) -> torch.Tensor:
+    """(M, dim) observations -> (M, dim + F): ``obs`` with ``features(obs)`` appended (``obs``
+    itself when ``features`` is None); what :class:`NormalisedMLP` standardises."""
+    return obs if features is None else torch.cat((obs, features(obs)), dim=-1)
 
 
 class NormalisedMLP(nn.Module):
@@ -133,9 +146,7 @@ class NormalisedMLP(nn.Module):
 
     def inputs(self, obs: torch.Tensor) -> torch.Tensor:
         """(M, dim) observations -> (M, dim + F): with the ``features`` appended, unscaled."""
-        if self.features is None:
-            return obs
-        return torch.cat((obs, self.features(obs)), dim=-1)
+        return with_features(obs, self.features)
 
     def mean_action(self, obs: torch.Tensor) -> torch.Tensor:
         """(M, dim) observations -> (M, 3) mean normalised action (unclipped)."""
