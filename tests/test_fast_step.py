@@ -122,3 +122,30 @@ def test_numpy_sums_as_the_kernels_do() -> None:
     """The machine check that guards the fast path holds here (else the tests above would not
     run the kernels at all)."""
     assert fast_step._platform_agrees()
+
+
+def test_without_numba_the_batched_path_runs(monkeypatch) -> None:
+    monkeypatch.setattr(fast_step, "AVAILABLE", False)
+    env = parallel_env("paper")
+    assert env.sim.fast_path is None
+    env.reset(seed=0)
+    env.step({a: np.zeros(3, dtype=np.float32) for a in env.agents})
+
+
+def test_an_unwritable_cache_compiles_without_it(monkeypatch) -> None:
+    """numba refuses cache=True where it finds no writable cache directory: the kernels are
+    then compiled for the process alone."""
+    numba = fast_step.observer_kernel.numba
+    compile_ = numba.njit
+    calls = []
+
+    def njit(*args, **kwargs):
+        calls.append(kwargs)
+        if kwargs.get("cache"):
+            raise RuntimeError("cannot cache function: no locator available")
+        return compile_(*args, **kwargs)
+
+    monkeypatch.setattr(numba, "njit", njit)
+    kernel = fast_step.njit(lambda x: x + 1.0)
+    assert kernel(1.0) == 2.0
+    assert calls == [{"cache": True}, {}]
