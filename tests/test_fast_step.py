@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from uav_formation_env import fast_step, parallel_env
+from uav_formation_env.config_io import paper_scenario, with_overrides
+from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.scenarios import windy_scenario
 
@@ -149,3 +151,24 @@ def test_an_unwritable_cache_compiles_without_it(monkeypatch) -> None:
     kernel = fast_step.njit(lambda x: x + 1.0)
     assert kernel(1.0) == 2.0
     assert calls == [{"cache": True}, {}]
+
+
+def test_batches_with_autoreset_and_random_starts_are_the_batched_ones() -> None:
+    """B = 3 copies (the kernels loop over copies), short episodes reset per copy, each episode
+    started at a random step (flown there by a second simulator, then adopted)."""
+    scenario = with_overrides(paper_scenario(), {"duration": 20.0, "episode.start": "random"})
+    fast = FormationEpisodes(scenario, 3, autoreset=True)
+    batched = FormationEpisodes(scenario, 3, autoreset=True)
+    assert fast.sim.fast_path is not None
+    batched.sim.fast_path = None
+    rng = np.random.default_rng(5)
+    _equal(fast.reset(seed=11), batched.reset(seed=11), "reset")
+    resets = 0
+    for k in range(250):
+        actions = rng.uniform(-1.2, 1.2, (3, scenario.n_uav, 3))
+        step = fast.step(actions)
+        _equal(step, batched.step(actions), f"step {k}")
+        for name in _SIM_STATE:
+            _equal(getattr(fast.sim, name), getattr(batched.sim, name), f"step {k} sim.{name}")
+        resets += int(step.done.sum())
+    assert resets >= 3
