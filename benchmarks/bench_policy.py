@@ -3,8 +3,10 @@
 Prints, per optimiser and observer setting: seconds per 1000-step episode and per control step
 (policy alone and policy + simulator), trigger counts per UAV (docs/model.md §8, Table 2), the
 minimum distance to the obstacle centres, and collisions (two UAVs closer than the scenario's 2 m).
-Seeds run one after another as B = 1 episodes, or all at once as B copies with ``--batched``
-(one optimiser call per step for every copy: seconds per episode = wall time / B).
+Before the timed episodes of each optimiser and observer setting, a throwaway 2-step run loads
+the compiled kernels (printed as the warm-up). Seeds run one after another as B = 1 episodes,
+or all at once as B copies with ``--batched`` (one optimiser call per step for every copy:
+seconds per episode = wall time / B).
 
     python benchmarks/bench_policy.py [--optimizers pio lfpio] [--observer on off]
                                       [--seeds 0 1] [--batched] [--steps 1000]
@@ -102,6 +104,12 @@ def main() -> None:
     )
     for optimizer in args.optimizers:
         for observer in args.observer:
+            # the compiled kernels' one-time load (numba's cache) in a throwaway run, so that
+            # s/episode is the episode's own cost
+            warm = episode(
+                optimizer, observer == "on", groups[0], 2, args.population_cost, overrides
+            )
+            print(f"{'':>24} warm-up (2 steps, kernels loaded): {warm['wall']:.2f} s")
             for seeds in groups:
                 out = episode(
                     optimizer, observer == "on", seeds, args.steps, args.population_cost, overrides
