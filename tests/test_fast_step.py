@@ -1,4 +1,4 @@
-"""The compiled B = 1 step (fast_step.py) gives the batched path's numbers bit for bit.
+"""The compiled step (fast_step.py, fast_kernels.py) gives the batched path's numbers bit for bit.
 
 Two environments of one scenario and seed are stepped with the same actions, one through the
 compiled kernels and one with the fast path removed (the batched numpy code, the one
@@ -13,7 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from uav_formation_env import fast_step, parallel_env
+from uav_formation_env import fast_kernels, fast_step, parallel_env
 from uav_formation_env.config_io import paper_scenario, with_overrides
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.policies.heuristic import consensus_pd
@@ -123,7 +123,7 @@ def test_uncovered_features_take_the_batched_path(scenario, overrides) -> None:
 def test_numpy_sums_as_the_kernels_do() -> None:
     """The machine check that guards the fast path holds here (else the tests above would not
     run the kernels at all)."""
-    assert fast_step._platform_agrees()
+    assert fast_kernels.platform_agrees()
 
 
 def test_without_numba_the_batched_path_runs(monkeypatch) -> None:
@@ -137,7 +137,7 @@ def test_without_numba_the_batched_path_runs(monkeypatch) -> None:
 def test_an_unwritable_cache_compiles_without_it(monkeypatch) -> None:
     """numba refuses cache=True where it finds no writable cache directory: the kernels are
     then compiled for the process alone."""
-    numba = fast_step.observer_kernel.numba
+    numba = fast_kernels.observer_kernel.numba
     compile_ = numba.njit
     calls = []
 
@@ -148,7 +148,7 @@ def test_an_unwritable_cache_compiles_without_it(monkeypatch) -> None:
         return compile_(*args, **kwargs)
 
     monkeypatch.setattr(numba, "njit", njit)
-    kernel = fast_step.njit(lambda x: x + 1.0)
+    kernel = fast_kernels.njit(lambda x: x + 1.0)
     assert kernel(1.0) == 2.0
     assert calls == [{"cache": True}, {}]
 
