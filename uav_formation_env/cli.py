@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -524,28 +525,67 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(reproduce)
     reproduce.set_defaults(func=_reproduce)
 
-    # Listed here for --help only: main() hands every argument after "train" to the baselines.
+    # Listed here for --help only: main() hands every argument after "train" to _train.
     sub.add_parser(
         "train",
-        help="train PPO or SAC (SB3, the [rl] extra) or --algo rllib-ppo (RLlib, the [rllib] "
-        "extra) with one policy shared by all UAVs (`uav-formation train --help` for options)",
+        help=f"train one policy shared by all UAVs (--algo {', '.join(TRAINERS)}) into a run "
+        "directory that evaluate flies (`uav-formation train --help`)",
         add_help=False,
     )
     return parser
 
 
-def _train(argv: list[str]) -> int:
-    from uav_formation_env.extras import require
-
-    if "rllib-ppo" in argv:  # --algo rllib-ppo: the RLlib recipe, in its own environment
-        require("ray.rllib", "uav-formation train --algo rllib-ppo")
-        from uav_formation_baselines.rllib_ppo import main as rllib_main
-
-        return int(rllib_main(argv))
-    require("stable_baselines3", "uav-formation train")
+def _train_sb3(argv: list[str]) -> int:
+    """``--algo ppo|sac``, and the help of ``uav-formation train`` (it lists every trainer)."""
     from uav_formation_baselines.train import main as train_main
 
-    return int(train_main(argv))
+    return int(train_main(argv, prog="uav-formation train", algos=tuple(TRAINERS)))
+
+
+RLLIB_VENV = (
+    "--algo rllib-ppo runs in a virtual environment of its own: ray[rllib] 2.60 pins gymnasium "
+    "1.2.2, so installing it into this one would downgrade gymnasium here. `bash "
+    "tests/rllib/run.sh` builds .venv-rllib (and runs the RLlib smoke test); then run "
+    "`.venv-rllib/bin/uav-formation train --algo rllib-ppo ...` and evaluate its policy.pt in "
+    "any environment with torch (docs/integrations.md)"
+)
+
+
+def _train_rllib(argv: list[str]) -> int:
+    """``--algo rllib-ppo``: the RLlib recipe, where ray.rllib imports (its own venv)."""
+    from uav_formation_baselines.rllib_ppo import main as rllib_main
+
+    if not {"-h", "--help"} & set(argv):
+        try:
+            import ray.rllib  # noqa: F401 - present only in the RLlib venv
+        except ImportError as error:
+            raise UserError(f"{RLLIB_VENV} (here: {error})") from None
+    return int(rllib_main(argv))
+
+
+# --algo -> the trainer given every argument after "train". The in-process on-policy trainer
+# (uav_formation_baselines.onpolicy: ppo-fast, mappo) is added here as it lands.
+TRAINERS: dict[str, Callable[[list[str]], int]] = {
+    "ppo": _train_sb3,
+    "sac": _train_sb3,
+    "rllib-ppo": _train_rllib,
+}
+
+
+def _algo_of(argv: list[str]) -> str | None:
+    """The value of ``--algo`` in ``argv`` (``--algo X`` or ``--algo=X``), else None."""
+    for k, item in enumerate(argv):
+        if item == "--algo" and k + 1 < len(argv):
+            return argv[k + 1]
+        if item.startswith("--algo="):
+            return item.partition("=")[2]
+    return None
+
+
+def _train(argv: list[str]) -> int:
+    """``uav-formation train``: the trainer of ``--algo``; without one (or an unknown one) the
+    SB3 trainer's parser, which prints the help or the one-line error listing every trainer."""
+    return TRAINERS.get(_algo_of(argv) or "", _train_sb3)(argv)
 
 
 def _one_line(error: BaseException) -> str:

@@ -1,0 +1,115 @@
+"""A new user's first hour: train, then evaluate the run directory; every trainer ends with the
+held-out mission report (:mod:`uav_formation_env.evaluation.heldout`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from uav_formation_env.cli import TRAINERS, main
+from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
+from uav_formation_env.evaluation import make_policy, run_episodes, summarise
+from uav_formation_env.evaluation.heldout import HELDOUT_FILE, heldout_report
+
+MODELS = Path(__file__).resolve().parents[1] / "baselines" / "models"
+
+
+def short_n3(duration: float = 4.0):
+    return with_overrides(resolve_scenario("n3"), {"duration": duration})
+
+
+# ------------------------------------------------------------------------------- heldout report
+def test_heldout_report_is_the_evaluation_summary_and_a_policy_equals_itself() -> None:
+    scenario = short_n3()
+    policy = make_policy("heuristic", scenario)
+    report = heldout_report(scenario, policy, [0, 1], policy_name="h", reference="heuristic")
+    summary = summarise(run_episodes(scenario, make_policy("heuristic", scenario), [0, 1]))
+    mission = summary["mission"]
+    assert report.completed == mission["completed"] == report.reference_completed
+    assert report.cost == pytest.approx(summary["realised_cost_mean"], rel=1e-12)
+    assert report.cost_ratio == pytest.approx(1.0, rel=1e-12)  # the same policy on the same seeds
+    assert report.route_error_max_m == max(mission["route_error_max_m_per_seed"])
+    assert report.collisions_after_start == mission["collisions_after_start"]
+    text = report.text()
+    assert f"completed {report.completed} of 2" in text and "1 x HEURISTIC's" in text
+
+
+def test_heldout_report_writes_json_and_needs_a_seed(tmp_path: Path) -> None:
+    scenario = short_n3()
+    report = heldout_report(
+        scenario, make_policy("random", scenario, seed=0), [3], reference=None,
+        training_reward=-12.5, out=tmp_path, duration=2.0,
+    )  # fmt: skip
+    data = json.loads((tmp_path / HELDOUT_FILE).read_text())
+    assert data["seeds"] == [3] and data["duration_s"] == 2.0 and data["cost_ratio"] is None
+    assert data["training_reward"] == -12.5 and "training reward" in report.text()
+    with pytest.raises(ValueError, match="seeds"):
+        heldout_report(scenario, make_policy("heuristic", scenario), [])
+
+
+# ------------------------------------------------------------------------------- run directories
+def test_shipped_sb3_run_directory_evaluates_by_its_directory(tmp_path: Path) -> None:
+    pytest.importorskip("stable_baselines3")
+    policy = make_policy(str(MODELS / "paper_ppo"), resolve_scenario("paper"))
+    assert policy.path.name == "model.zip" and policy.normalizer is not None
+    out = tmp_path / "eval"
+    args = ["evaluate", "--policy", str(MODELS / "paper_ppo"), "--seeds", "1", "--duration", "2"]
+    assert main([*args, "--out", str(out), "--quiet"]) == 0
+    assert (out / "summary.json").is_file()
+
+
+def test_a_directory_without_a_model_is_a_one_line_error(tmp_path: Path, capsys) -> None:
+    with pytest.raises(FileNotFoundError, match="holds no model"):
+        make_policy(str(tmp_path), resolve_scenario("paper"))
+    assert main(["evaluate", "--policy", str(tmp_path), "--out", str(tmp_path / "e")]) == 2
+    assert "policy.pt" in capsys.readouterr().err
+
+
+def test_cli_train_then_evaluate_the_run_directory(tmp_path: Path, capsys) -> None:
+    """``uav-formation train`` ends with the held-out mission; ``evaluate --policy DIR`` flies
+    the directory it wrote."""
+    pytest.importorskip("stable_baselines3")
+    yaml_path = tmp_path / "n3_short.yaml"
+    save_scenario(short_n3(), yaml_path)
+    out = tmp_path / "run"
+    code = main(
+        [
+            "train", "--algo", "ppo", "--timesteps", "384", "--out", str(out),
+            "--scenario", str(yaml_path), "--copies", "2", "--no-progress", "--heldout-seeds", "2",
+            "--set", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=0",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "held-out mission" in printed and "completed" in printed and "LFPIO's" in printed
+    heldout = json.loads((out / HELDOUT_FILE).read_text())
+    assert heldout["seeds"] == [0, 1] and heldout["reference"] == "lfpio"
+    evaluated = tmp_path / "eval"
+    args = ["evaluate", "--policy", str(out), "--seeds", "1", "--quick", "--out", str(evaluated)]
+    assert main([*args, "--quiet"]) == 0
+    summary = json.loads((evaluated / "summary.json").read_text())
+    assert summary["mission"]["episodes"] == 1 and summary["scenario"] == short_n3().name
+
+
+# ------------------------------------------------------------------------------- train command
+def test_train_is_a_command_of_its_own(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = capsys.readouterr().out
+    assert text.startswith("usage: uav-formation train")
+    assert "{ppo,sac,rllib-ppo}" in text and "(default: paper)" in text and " s " in text
+    assert set(TRAINERS) >= {"ppo", "sac", "rllib-ppo"}
+
+
+def test_rllib_without_its_venv_points_to_it_not_to_pip(tmp_path: Path, capsys) -> None:
+    try:
+        import ray.rllib  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        pytest.skip("ray.rllib imports here: this is the RLlib venv")
+    assert main(["train", "--algo", "rllib-ppo", "--out", str(tmp_path)]) == 2
+    error = capsys.readouterr().err
+    assert "tests/rllib/run.sh" in error and "pip install" not in error
