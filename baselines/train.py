@@ -247,26 +247,12 @@ def training_reward(progress_csv: Path) -> float | None:
 
 
 def report_heldout(out: Path, seeds: int, progress: bool = True):
-    """Fly the saved run ``out`` (as ``uav-formation evaluate --policy out`` does) and LFPIO on
-    held-out seeds 0..seeds-1; print and return the report (None when ``seeds`` is 0)."""
-    from uav_formation_env.config_io import load_scenario
-    from uav_formation_env.evaluation import make_policy
-    from uav_formation_env.evaluation.heldout import heldout_report
+    """The held-out mission of the saved run (:func:`~uav_formation_env.evaluation.heldout.
+    report_run`) beside its last training reward."""
+    from uav_formation_env.evaluation.heldout import report_run
 
-    if seeds == 0:
-        return None
-    scenario = load_scenario(out / "scenario.yaml")
-    report = heldout_report(
-        scenario,
-        make_policy(str(out), scenario),
-        range(seeds),
-        policy_name=str(out),
-        training_reward=training_reward(out / "progress.csv"),
-        out=out,
-        progress=progress,
-    )
-    print(report.text())
-    return report
+    reward = training_reward(out / "progress.csv")
+    return report_run(out, seeds, training_reward=reward, progress=progress)
 
 
 def main(
@@ -299,7 +285,6 @@ def main(
         f"{config['wall_time_s']:.0f} s ({config['agent_steps_per_s']:.0f}/s); wrote {args.out}"
     )
     report_heldout(Path(args.out), args.heldout_seeds, progress=not args.no_progress)
-    print(f"fly it again: uav-formation evaluate --policy {args.out} --seeds 10")
     return 0
 
 

@@ -19,12 +19,12 @@ from pathlib import Path
 from typing import Any
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.config_io import with_overrides
+from uav_formation_env.config_io import load_scenario, with_overrides
 from uav_formation_env.evaluation.metrics import summarise_groups
 from uav_formation_env.evaluation.runner import run_episode_groups
 from uav_formation_env.policies.registry import BatchPolicy, make_policy
 
-__all__ = ["HELDOUT_FILE", "HELDOUT_SEEDS", "HeldoutReport", "heldout_report"]
+__all__ = ["HELDOUT_FILE", "HELDOUT_SEEDS", "HeldoutReport", "heldout_report", "report_run"]
 
 HELDOUT_SEEDS = (0, 1, 2)  # the first evaluation seeds (training uses 1000+ and 5000+)
 HELDOUT_FILE = "heldout.json"
@@ -162,4 +162,35 @@ def heldout_report(
         path = Path(out) / HELDOUT_FILE
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+    return report
+
+
+def report_run(
+    out: str | Path,
+    seeds: int = len(HELDOUT_SEEDS),
+    *,
+    training_reward: float | None = None,
+    reference: str | None = "lfpio",
+    progress: bool = False,
+) -> HeldoutReport | None:
+    """The end of a training run: fly the run directory ``out`` as ``uav-formation evaluate
+    --policy out`` does (its model on its ``scenario.yaml``) and ``reference`` on held-out seeds
+    0..seeds-1; write ``heldout.json``, print the report and return it (None when ``seeds`` is 0).
+    """
+    if seeds == 0:
+        return None
+    out = Path(out)
+    scenario = load_scenario(out / "scenario.yaml")
+    report = heldout_report(
+        scenario,
+        make_policy(str(out), scenario),
+        range(int(seeds)),
+        policy_name=str(out),
+        reference=reference,
+        training_reward=training_reward,
+        out=out,
+        progress=progress,
+    )
+    print(report.text())
+    print(f"fly it again: uav-formation evaluate --policy {out} --seeds 10")
     return report
