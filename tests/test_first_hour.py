@@ -113,3 +113,63 @@ def test_rllib_without_its_venv_points_to_it_not_to_pip(tmp_path: Path, capsys) 
     assert main(["train", "--algo", "rllib-ppo", "--out", str(tmp_path)]) == 2
     error = capsys.readouterr().err
     assert "tests/rllib/run.sh" in error and "pip install" not in error
+
+
+# ------------------------------------------------------------------------------- smaller items
+def test_progress_eta_counts_from_the_first_step_not_from_the_start_up() -> None:
+    import io
+    import time
+
+    from tqdm import tqdm
+
+    from uav_formation_env.reproduce.run import advance
+
+    bar = tqdm(total=1000, file=io.StringIO(), mininterval=0.0)
+    bar.start_t -= 3600.0  # an hour of start-up before the first step
+    bar.last_print_t -= 3600.0
+    advance(bar, 10)
+    assert bar.n == 10 and bar.format_dict["elapsed"] < 60.0
+    time.sleep(0.05)
+    advance(bar, 10)
+    assert bar.n == 20 and bar.format_dict["rate"] > 20.0  # steps/s: ETA in seconds, not hours
+    bar.close()
+
+
+def test_top_level_help_is_plain_text_with_every_policy(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = capsys.readouterr().out
+    assert "``" not in text and ":mod:" not in text
+    assert "lfpio, pio, pso, exact, nash, heuristic, random" in text
+    assert "run directory" in text and "Figs. 5-10" in text and "Figs. 5-9" not in text
+
+
+def test_render_has_a_description_and_quick(tmp_path: Path, capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["render", "--help"])
+    text = capsys.readouterr().out
+    assert "top view" in text and "--quick" in text
+    out = tmp_path / "episode.gif"
+    args = ["render", "--policy", "heuristic", "--quick", "--every", "25", "--out", str(out)]
+    assert main([*args, "--quiet"]) == 0
+    from PIL import Image, ImageSequence
+
+    with Image.open(out) as image:
+        frames = sum(1 for _ in ImageSequence.Iterator(image))
+    assert frames == 100 // 25 + 1  # 20 s of 0.2 s steps, one frame every 25 steps and the start
+
+
+def test_shielded_evaluation_says_so_in_the_plot_title(tmp_path: Path, monkeypatch) -> None:
+    import uav_formation_env.plotting as plotting
+
+    titles = []
+    real = plotting.plot_trajectories
+    monkeypatch.setattr(
+        plotting, "plot_trajectories", lambda *a, **k: titles.append(k["title"]) or real(*a, **k)
+    )
+    local = tmp_path / "local.yaml"
+    save_scenario(with_overrides(short_n3(2.0), {"observation.kind": "local"}), local)
+    args = ["evaluate", "--policy", "heuristic", "--scenario", str(local), "--seeds", "1"]
+    assert main([*args, "--shield", "--out", str(tmp_path / "e"), "--quiet"]) == 0
+    assert main([*args, "--out", str(tmp_path / "f"), "--quiet"]) == 0
+    assert "safety shield" in titles[0] and "safety shield" not in titles[1]
