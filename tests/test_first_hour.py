@@ -173,3 +173,59 @@ def test_shielded_evaluation_says_so_in_the_plot_title(tmp_path: Path, monkeypat
     assert main([*args, "--shield", "--out", str(tmp_path / "e"), "--quiet"]) == 0
     assert main([*args, "--out", str(tmp_path / "f"), "--quiet"]) == 0
     assert "safety shield" in titles[0] and "safety shield" not in titles[1]
+
+
+# ------------------------------------------------------------------------------- README, docs
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _words(text: str) -> str:
+    return " ".join(text.split())
+
+
+def test_readme_durations_are_the_recorded_measurements() -> None:
+    """Every duration the README gives is a row of docs/durations.md, and its minutes are that
+    row's measured seconds: CPU time as "minutes of computing", wall time as "minutes measured"."""
+    import re
+
+    readme = _words((ROOT / "README.md").read_text(encoding="utf-8"))
+    rows = re.findall(
+        r"^\| ([\w-]+) \| ([^|]+) \| ([^|]+) \|", (ROOT / "docs" / "durations.md").read_text(),
+        flags=re.M,
+    )  # fmt: skip
+    rows = {name: (says.strip(), measured) for name, says, measured in rows if name != "command"}
+    assert set(rows) == {"main-command", "test-command", "shield-command"}
+    for name, (says, measured) in rows.items():
+        assert says in readme, name
+        cpu = re.search(r"CPU (\d+) s", measured)
+        wall = re.search(r"wall (\d+) s", measured)
+        if cpu:
+            assert f"about {round(int(cpu.group(1)) / 60)} minutes of computing" in says, name
+        if wall:
+            assert f"{round(int(wall.group(1)) / 60)} minutes measured" in says, name
+    main_block = readme[readme.index("<!-- main-command -->") - 400 : readme.index("<!-- main")]
+    assert rows["main-command"][0] in main_block  # said where the command is
+    assert "about a minute" not in readme
+
+
+def test_docs_index_lists_every_page_and_the_readme_links_it() -> None:
+    index = (ROOT / "docs" / "README.md").read_text(encoding="utf-8")
+    for page in (ROOT / "docs").glob("*.md"):
+        if page.name != "README.md":
+            assert f"]({page.name})" in index, page.name
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert "](docs/README.md)" in readme and "](docs/scenarios.md)" in readme
+
+
+def test_first_use_block_runs_with_the_base_install(monkeypatch, tmp_path: Path) -> None:
+    """The README's first Python block, right after the Quick start, needs no extra: it runs
+    with stable-baselines3 and torch unimportable."""
+    import re
+    import sys
+
+    for module in ("stable_baselines3", "torch"):
+        monkeypatch.setitem(sys.modules, module, None)  # import raises ImportError
+    monkeypatch.chdir(tmp_path)
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    first = re.findall(r"```python\n(.*?)```", readme, flags=re.S)[0]
+    exec(compile(first, "README.md python block 1", "exec"), {"__name__": "__readme__"})
