@@ -229,3 +229,28 @@ def test_first_use_block_runs_with_the_base_install(monkeypatch, tmp_path: Path)
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     first = re.findall(r"```python\n(.*?)```", readme, flags=re.S)[0]
     exec(compile(first, "README.md python block 1", "exec"), {"__name__": "__readme__"})
+
+
+def test_rllib_recipe_ends_with_the_heldout_report(tmp_path: Path, monkeypatch, capsys) -> None:
+    """The RLlib recipe's end (its training needs the RLlib venv, replaced here by a run
+    directory as it writes one): the held-out mission of its policy.pt."""
+    pytest.importorskip("torch")
+    import numpy as np
+
+    from uav_formation_baselines import rllib_ppo
+    from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy
+
+    scenario = short_n3()
+
+    def fake_train(args):
+        dim = 33  # n3's full observation
+        module = NormalisedMLP(np.zeros(dim), np.ones(dim), hidden=(8,))
+        save_policy(module, Path(args.out) / "policy.pt", np.zeros((2, dim), dtype=np.float32))
+        save_scenario(scenario, Path(args.out) / "scenario.yaml")
+        return {"returns": [float("nan"), -120.5]}
+
+    monkeypatch.setattr(rllib_ppo, "train", fake_train)
+    assert rllib_ppo.main(["--out", str(tmp_path), "--heldout-seeds", "1", "--quiet"]) == 0
+    assert "held-out mission" in capsys.readouterr().out
+    heldout = json.loads((tmp_path / HELDOUT_FILE).read_text())
+    assert heldout["seeds"] == [0] and heldout["training_reward"] == -120.5
