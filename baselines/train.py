@@ -172,10 +172,10 @@ Train one policy shared by all UAVs and save a run directory that
 training reward.
 
 --algo ppo / sac: stable-baselines3 over the batched VecEnv (the [rl] extra). PPO on
-the paper's scenario learns at ~8,000-11,000 agent-steps/s on one core, plus one
+the paper's scenario learned at 2,000-8,000 agent-steps/s on one core of a 2-core machine
+shared with other jobs (the shipped paper_ppo's config.yaml: 11,000/s), plus one
 evaluation (4 episodes) every eval_freq agent-steps and ~10 s of held-out flights at the
-end: --timesteps 20000 takes ~15 s in all, the shipped paper_ppo's 3,000,000 ~5 min.
-SAC is ~5x slower per agent-step.
+end: --timesteps 20000 took 15-25 s in all. SAC is ~5x slower per agent-step.
 --algo rllib-ppo: RLlib in its own virtual environment (ray[rllib] pins gymnasium 1.2.2);
 see `uav-formation train --algo rllib-ppo --help`."""
 
