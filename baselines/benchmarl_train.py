@@ -37,6 +37,7 @@ from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.torch_policy import ACTIVATIONS, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config_io import save_scenario
+from uav_formation_env.evaluation.heldout import report_run
 
 __all__ = [
     "ALGORITHMS",
@@ -297,6 +298,8 @@ def train_benchmarl(
         "agent_steps": int(experiment.total_frames) * scen.n_uav,
         "wall_time_s": seconds,
         "torch_threads": int(threads),
+        # the transformed reward per UAV-step of the last batch (None: no batch)
+        "final_reward_per_uav_step": progress[-1]["mean_reward_per_uav_step"] if progress else None,
     }
     with open(out / "config.yaml", "w", encoding="utf-8") as stream:
         yaml.safe_dump(record, stream, sort_keys=False)
@@ -318,6 +321,12 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUE",
         help="overrides, values parsed as YAML (task.reward=raw, frames=...)",
     )
+    parser.add_argument(
+        "--heldout-seeds",
+        type=int,
+        default=3,
+        help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
+    )
     args = parser.parse_args(argv)
     try:
         config = load_config(args.algo, args.config, **parse_set(args.set))
@@ -328,6 +337,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(f"wrote {args.out}/policy.pt: {record['frames']} frames in {record['wall_time_s']:.0f} s")
+    report_run(args.out, args.heldout_seeds, training_reward=record["final_reward_per_uav_step"])
     return 0
 
 

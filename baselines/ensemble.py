@@ -31,6 +31,7 @@ from uav_formation_baselines.torch_policy import MeanEnsemble, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config_io import load_scenario, save_scenario
 from uav_formation_env.episode import FormationEpisodes
+from uav_formation_env.evaluation.heldout import report_run
 from uav_formation_env.scenes import seeds_by_n_uav
 
 __all__ = ["build_ensemble", "rank_runs", "validation_score"]
@@ -127,6 +128,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("runs", nargs="+", help="finished run directories (same scenario)")
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--top", type=int, default=None, help="keep the K best-validated runs")
+    parser.add_argument(
+        "--heldout-seeds",
+        type=int,
+        default=3,
+        help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
+    )
     args = parser.parse_args(argv)
     try:
         record = build_ensemble(args.runs, args.out, args.top)
@@ -135,6 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     names = ", ".join(Path(m["run"]).name for m in record["members"])
     print(f"wrote {args.out}/policy.pt: the mean of {len(record['members'])} members ({names})")
+    report_run(args.out, args.heldout_seeds)
     return 0
 
 

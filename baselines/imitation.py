@@ -66,6 +66,7 @@ from uav_formation_env.config_io import (
     save_scenario,
     with_overrides,
 )
+from uav_formation_env.evaluation.heldout import report_run
 from uav_formation_env.policies import DMPC_OPTIMIZERS
 
 __all__ = [
@@ -537,6 +538,12 @@ def main(argv: list[str] | None = None) -> int:
         help="do not train: choose the finished run's policy.pt again on this many validation "
         "seeds (select_round)",
     )
+    parser.add_argument(
+        "--heldout-seeds",
+        type=int,
+        default=3,
+        help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
+    )
     args = parser.parse_args(argv)
     try:
         if args.select is not None:
@@ -566,6 +573,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(f"wrote {args.out}/policy.pt {done}")
+    if args.select is None:  # a new policy: its mission on held-out seeds
+        report_run(args.out, args.heldout_seeds)
     return 0
 
 

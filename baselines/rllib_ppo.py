@@ -226,6 +226,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--quick", action="store_true", help="one tiny iteration (the smoke test's size)"
     )
+    parser.add_argument(
+        "--heldout-seeds",
+        type=integer_at_least(0),
+        default=3,
+        help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
+    )
     return parser
 
 
@@ -239,7 +245,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def main(argv: list[str] | None = None) -> int:
-    train(parse_args(argv))
+    from uav_formation_env.evaluation.heldout import report_run
+
+    args = parse_args(argv)
+    summary = train(args)
+    returns = [r for r in summary["returns"] if math.isfinite(r)]
+    reward = returns[-1] if returns else None  # RLlib's: the 5 UAVs' summed episode return
+    report_run(args.out, args.heldout_seeds, training_reward=reward, progress=not args.quiet)
     return 0
 
 

@@ -8,7 +8,9 @@ of the :class:`~uav_formation_env.envs.vector.FormationVecEnv`, so one control s
 of the paper's 5 UAVs is 5 B timesteps (PPO rounds up to whole rollouts of n_steps x 5 B).
 
 The output directory holds ``model.zip`` and ``vecnormalize.pkl`` (load both with
-``uav-formation evaluate --policy DIR/model.zip``), ``config.yaml`` (resolved hyper-parameters,
+``uav-formation evaluate --policy DIR``), ``heldout.json`` (the mission on held-out seeds beside
+LFPIO's, printed at the end: :func:`uav_formation_env.evaluation.heldout.heldout_report`),
+``config.yaml`` (resolved hyper-parameters,
 scenario, seed, timesteps, wall time), ``scenario.yaml`` (the evaluated scenario), ``progress.csv``
 and ``tensorboard/`` (SB3 logger), and with evaluation on ``evaluations.csv`` and ``best/``
 (model and statistics of the best evaluation), with checkpoints on ``checkpoints/<steps>/``.
@@ -36,6 +38,7 @@ from uav_formation_baselines.config import (
 from uav_formation_env.cli import OneLineParser, integer_at_least
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import SCENARIOS, resolve_scenario, save_scenario
+from uav_formation_env.evaluation.heldout import HELDOUT_SEEDS
 
 
 def scenario_key(scenario: str | Path | Scenario) -> str:
@@ -162,13 +165,32 @@ def _versions() -> dict[str, str]:
     }
 
 
-def build_parser() -> argparse.ArgumentParser:
+TRAIN_DESCRIPTION = """\
+Train one policy shared by all UAVs and save a run directory that
+`uav-formation evaluate --policy OUT` flies; at the end the policy and LFPIO fly
+--heldout-seeds held-out seeds (0, 1, ...) and the mission is printed beside the
+training reward.
+
+--algo ppo / sac: stable-baselines3 over the batched VecEnv (the [rl] extra). PPO on
+the paper's scenario learned at 2,000-8,000 agent-steps/s on one core of a 2-core machine
+shared with other jobs (the shipped paper_ppo's config.yaml: 11,000/s), plus one
+evaluation (4 episodes) every eval_freq agent-steps and ~10 s of held-out flights at the
+end: --timesteps 20000 took 15-25 s in all. SAC is ~5x slower per agent-step.
+--algo rllib-ppo: RLlib in its own virtual environment (ray[rllib] pins gymnasium 1.2.2);
+see `uav-formation train --algo rllib-ppo --help`."""
+
+
+def build_parser(
+    prog: str = "python -m uav_formation_baselines.train", algos: tuple[str, ...] = ALGOS
+) -> argparse.ArgumentParser:
+    """The SB3 trainer's options; ``algos``: the ``--algo`` choices shown (the CLI lists every
+    trainer it dispatches to)."""
     parser = OneLineParser(
-        prog="python -m uav_formation_baselines.train",
-        description="Train PPO or SAC on a uav_formation_env scenario, one policy shared by "
-        "all UAVs.",
+        prog=prog,
+        description=TRAIN_DESCRIPTION,
+        formatter_class=TrainHelpFormatter,
     )
-    parser.add_argument("--algo", choices=ALGOS, required=True)
+    parser.add_argument("--algo", choices=algos, required=True, help="the trainer")
     parser.add_argument(
         "--timesteps",
         type=integer_at_least(1),
@@ -196,12 +218,55 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--hyperparams", default=None, help="YAML file (default: shipped)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--log-stdout", action="store_true", help="print SB3's log tables")
+    parser.add_argument(
+        "--heldout-seeds",
+        type=integer_at_least(0),
+        default=len(HELDOUT_SEEDS),
+        help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
+    )
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
+class TrainHelpFormatter(
+    argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter
+):
+    """Defaults in every option's help, the description as written."""
+
+
+def training_reward(progress_csv: Path) -> float | None:
+    """The last ``rollout/ep_rew_mean`` of SB3's ``progress.csv`` (the transformed, normalised
+    reward of one UAV's episode), or None if no episode ended."""
+    import csv
+
+    if not progress_csv.is_file():
+        return None
+    with open(progress_csv, newline="", encoding="utf-8") as stream:
+        values = [row.get("rollout/ep_rew_mean") for row in csv.DictReader(stream)]
+    values = [float(v) for v in values if v not in (None, "")]
+    return values[-1] if values else None
+
+
+def report_heldout(out: Path, seeds: int, progress: bool = True):
+    """The held-out mission of the saved run (:func:`~uav_formation_env.evaluation.heldout.
+    report_run`) beside its last training reward."""
+    from uav_formation_env.evaluation.heldout import report_run
+
+    reward = training_reward(out / "progress.csv")
+    return report_run(out, seeds, training_reward=reward, progress=progress)
+
+
+def main(
+    argv: list[str] | None = None,
+    prog: str = "python -m uav_formation_baselines.train",
+    algos: tuple[str, ...] = ALGOS,
+) -> int:
     """Command-line entry point; returns the exit code."""
-    args = build_parser().parse_args(None if argv is None else list(argv))
+    from uav_formation_env.extras import require
+
+    args = build_parser(prog, algos).parse_args(None if argv is None else list(argv))
+    if args.algo not in ALGOS:
+        raise ValueError(f"--algo {args.algo} is not a stable-baselines3 algorithm {ALGOS}")
+    require("stable_baselines3", f"{prog} --algo {args.algo}")
     config = train(
         args.algo,
         args.timesteps,
@@ -219,6 +284,7 @@ def main(argv: list[str] | None = None) -> int:
         f"trained {config['algo']} for {config['timesteps']} agent-steps in "
         f"{config['wall_time_s']:.0f} s ({config['agent_steps_per_s']:.0f}/s); wrote {args.out}"
     )
+    report_heldout(Path(args.out), args.heldout_seeds, progress=not args.no_progress)
     return 0
 
 

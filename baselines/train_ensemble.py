@@ -43,6 +43,7 @@ from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.ensemble import build_ensemble
 from uav_formation_baselines.imitation import config_section, load_config, resolve_device
 from uav_formation_env.cli import OneLineParser
+from uav_formation_env.evaluation.heldout import report_run
 
 __all__ = ["RECIPE", "train_ensemble"]
 
@@ -193,6 +194,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--config", default=None, help="YAML (default: bc_ensemble.yml)")
     parser.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="overrides")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--heldout-seeds",
+        type=int,
+        default=3,
+        help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
+    )
     args = parser.parse_args(argv)
     try:
         record = train_ensemble(
@@ -207,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
         f"wrote {args.out}/policy.pt: the mean of {len(record['members'])} of {args.runs} students "
         f"({names}) in {record['recipe_wall_time_s']:.0f} s"
     )
+    report_run(args.out, args.heldout_seeds, progress=not args.quiet)
     return 0
 
 

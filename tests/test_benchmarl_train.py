@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -68,6 +69,9 @@ def test_cli_trains_and_exports_a_policy_the_runner_flies(tmp_path: Path) -> Non
     assert len(rows) == 3  # header + 2 iterations of 200 frames
     policy = make_policy(str(tmp_path), resolve_scenario("paper"))
     assert policy.act_batch(np.zeros((2, 5, 47), dtype=np.float32)).shape == (2, 5, 3)
+    heldout = json.loads((tmp_path / "heldout.json").read_text())  # the end-of-training report
+    assert heldout["seeds"] == [0, 1, 2] and heldout["reference"] == "lfpio"
+    assert heldout["training_reward"] < 0  # the last batch's transformed reward
 
 
 def test_cli_reports_bad_settings_in_one_line(tmp_path: Path, capsys) -> None:

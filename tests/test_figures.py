@@ -1,10 +1,11 @@
 """The reproduction's figures from a short real run: Fig. 8's labels, Fig. 5's obstacle zooms,
-Fig. 10's legend clear of the data."""
+every curve of Figs. 8-10 visible."""
 
 from __future__ import annotations
 
 import dataclasses
 import re
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,12 +21,14 @@ from uav_formation_env.config_io import paper_scenario
 from uav_formation_env.plotting import (
     ZOOM_REACH,
     detection_radius,
+    plot_trigger_timeline,
     plot_variant_trajectories,
     zoom_axes,
 )
 from uav_formation_env.reproduce import FIGURES, run_variant
 from uav_formation_env.reproduce.figures import FIG8_QUANTITY, draw_figures, write_figures
 from uav_formation_env.reproduce.nash_analysis import NASH_FIGURE, nash_gap_figure, plot_nash_gap
+from uav_formation_env.reproduce.variants import LABELS
 
 PAPER = paper_scenario()
 VARIANTS = ("pio_nftsmo", "lfpio_nftsmo")
@@ -171,35 +174,78 @@ def legend_covers_data(fig: Figure) -> bool:
     return False
 
 
-def _legend_inside_figure(fig: Figure) -> bool:
-    fig.canvas.draw()
-    box = fig.axes[0].get_legend().get_window_extent(fig.canvas.get_renderer())
-    return box.x0 >= 0 and box.y0 >= 0 and box.x1 <= fig.bbox.x1 and box.y1 <= fig.bbox.y1
-
-
-def test_fig10_legend_does_not_cover_the_data(batches):
-    fig = nash_gap_figure(batches)
-    [ax] = fig.axes
-    assert len(ax.get_lines()) == len(VARIANTS)
-    assert ax.get_legend() is not None
-    assert not legend_covers_data(fig)
-    assert _legend_inside_figure(fig)  # not cut off
-
-
-def test_fig10_legend_clear_of_curves_filling_the_axes():
-    """Seven noisy curves over the whole axes: any legend inside the axes would cover some."""
-    rng = np.random.default_rng(0)
-    t = np.arange(401) * 0.2
-    fake = {}
-    for variant in ["pio", "lfpio", "pio_nftsmo", "lfpio_nftsmo", "pso", "exact", "nash"]:
-        level = 10.0 ** rng.uniform(-12, 3, size=(400, 1, 5))
-        fake[variant] = SimpleNamespace(
-            t=t, nash_gap=level, nash_in_box=np.ones((400, 1, 5), dtype=bool)
+def fake_gaps(variants, rng, steps=400):
+    t = np.arange(steps + 1) * 0.2
+    return {
+        v: SimpleNamespace(
+            t=t,
+            nash_gap=10.0 ** rng.uniform(-12, 3, size=(steps, 1, 5)),
+            nash_in_box=np.ones((steps, 1, 5), dtype=bool),
         )
+        for v in variants
+    }
+
+
+def test_fig10_one_panel_per_solver_so_every_curve_shows(batches):
+    fig = nash_gap_figure(batches)
+    assert len(fig.axes) == len(VARIANTS)
+    for ax, variant in zip(fig.axes, VARIANTS):
+        assert ax.get_title(loc="left") == LABELS[variant]
+        *others, own = ax.get_lines()
+        assert len(others) == len(VARIANTS) - 1  # the others, grey, for comparison
+        assert all(line.get_color() == "0.8" for line in others)
+        assert own.get_color() != "0.8"
+        assert ax.get_legend() is None
+
+
+def test_fig10_seven_identical_levels_stay_visible():
+    """Seven solvers with the same gaps: each still has a panel of its own."""
+    fake = fake_gaps(["pio", "lfpio", "pio_nftsmo", "lfpio_nftsmo", "pso", "exact", "nash"],
+                     np.random.default_rng(0))  # fmt: skip
+    same = next(iter(fake.values())).nash_gap
+    for batch in fake.values():
+        batch.nash_gap = same
     fig = nash_gap_figure(fake)
-    assert len(fig.axes[0].get_lines()) == 7
-    assert not legend_covers_data(fig)
-    assert _legend_inside_figure(fig)
+    assert len(fig.axes) == 7 and all(len(ax.get_lines()) == 7 for ax in fig.axes)
+
+
+def test_fig10_a_step_without_an_in_box_plan_is_a_gap_not_a_warning():
+    fake = fake_gaps(["pio"], np.random.default_rng(1), steps=4)
+    fake["pio"].nash_in_box[2] = False  # no UAV of any seed in the box at step 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's "All-NaN slice encountered"
+        fig = nash_gap_figure(fake)
+    curve = fig.axes[0].get_lines()[-1].get_ydata()
+    assert np.isnan(curve[2]) and np.isfinite(curve[[0, 1, 3]]).all()
+
+
+# ------------------------------------------------------------------ Fig. 8 and Fig. 9 legibility
+def test_fig8_event_labels_sit_above_the_axes(figures):
+    fig = figures["fig8_log_cost.png"]
+    [ax] = fig.axes
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    top = ax.get_window_extent(renderer).y1
+    labels = [child for child in ax.texts if child.get_rotation() == 90]
+    assert len(labels) >= 3  # O1 split, O1 restore, O2, the turns
+    assert all(label.get_window_extent(renderer).y0 >= top for label in labels)
+    title = ax.title.get_window_extent(renderer)
+    assert all(label.get_window_extent(renderer).y1 <= title.y0 for label in labels)
+
+
+def test_fig9_equal_cumulative_counts_stay_visible():
+    t = np.arange(100) * 0.2
+    every = np.ones(100, dtype=bool)
+    fig = plot_trigger_timeline(
+        t, {"PIO": every, "LFPIO": every}, {"PIO": np.cumsum(every), "LFPIO": np.cumsum(every)}
+    )
+    lines = fig.axes[1].get_lines()
+    assert lines[0].get_linewidth() > lines[1].get_linewidth()  # the first shows around the second
+    assert lines[0].get_linestyle() != lines[1].get_linestyle()
+    assert [text.get_text() for text in fig.axes[1].get_legend().get_texts()] == [
+        "PIO (100)",
+        "LFPIO (100)",
+    ]
 
 
 def test_legend_check_sees_a_legend_over_the_data():

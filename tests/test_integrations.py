@@ -1,7 +1,9 @@
 """Trainers use the environment unpatched: TorchRL's PettingZoo wrapper passes its own checker, and
 every example of examples/ (TorchRL MAPPO, BenchMARL MAPPO, CleanRL-style PPO, SB3 PPO) runs its
 ``--quick`` path here: a few hundred env steps and one or two updates, finite returns, the
-policy's parameters changed. RLlib lives in its own venv: tests/rllib (``bash tests/rllib/run.sh``).
+policy's parameters changed, a run directory that ``uav-formation evaluate --policy OUT`` flies
+and the held-out mission report at the end. RLlib lives in its own venv: tests/rllib
+(``bash tests/rllib/run.sh``).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 # the per-step reward with the devices is -log(1 + J / 100): J up to ~1e12 gives ~23 per UAV-step
 MAX_STEP_REWARD = 30.0
+HELDOUT = ["--heldout-seeds", "2", "--quiet"]  # the end-of-training report on two seeds
 
 
 def load_example(name: str, *requires: str) -> ModuleType:
@@ -33,6 +36,20 @@ def load_example(name: str, *requires: str) -> ModuleType:
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def check_run_flies(result: dict, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The example printed the held-out mission, and ``uav-formation evaluate --policy OUT
+    --seeds 1 --quick`` flies the run directory it saved."""
+    from uav_formation_env.cli import main as cli_main
+
+    printed = capsys.readouterr().out
+    assert "held-out mission" in printed and "LFPIO's" in printed
+    assert result["heldout"] is not None and len(result["heldout"].seeds) == 2
+    out = tmp_path / "evaluate"
+    args = ["evaluate", "--policy", str(result["out"]), "--seeds", "1", "--quick", "--quiet"]
+    assert cli_main([*args, "--out", str(out)]) == 0
+    assert (out / "summary.json").is_file()
 
 
 def check_returns(returns: list[float], steps_per_episode: int) -> None:
@@ -72,11 +89,13 @@ def test_torchrl_sees_the_training_devices() -> None:
     assert np.abs(reward).max() < 20.0  # a few units, not the raw 1e2..1e8
 
 
-def test_torchrl_mappo_example() -> None:
+def test_torchrl_mappo_example(tmp_path: Path, capsys) -> None:
     example = load_example("torchrl_mappo", "torchrl")
-    result = example.main(["--quick"])  # 2 x 200 frames, 100-step episodes
+    # 2 x 200 frames, 100-step episodes
+    result = example.main(["--quick", "--out", str(tmp_path / "run"), *HELDOUT])
     check_returns(result["returns"], 100)
     assert result["parameters_changed"]
+    check_run_flies(result, tmp_path, capsys)
 
 
 # ---------------------------------------------------------------------------------- BenchMARL
@@ -127,14 +146,15 @@ def test_benchmarl_task_class() -> None:
 
 
 @pytest.mark.parametrize("backend", ["pettingzoo", "torch"])
-def test_benchmarl_mappo_example(backend: str) -> None:
+def test_benchmarl_mappo_example(backend: str, tmp_path: Path, capsys) -> None:
     example = load_example("benchmarl_mappo", "benchmarl")
     # 1 iteration of 200 frames, 100-step episodes
-    result = example.main(["--quick", "--backend", backend])
+    result = example.main(["--quick", "--backend", backend, "--out", str(tmp_path), *HELDOUT])
     assert result["iterations"] == 1
     assert result["finite"] and result["mean_return"] < 0
     assert abs(result["mean_return"]) <= MAX_STEP_REWARD * 100
     assert result["parameters_changed"]
+    check_run_flies(result, tmp_path, capsys)
 
 
 def test_benchmarl_torch_backend_task() -> None:
@@ -159,22 +179,25 @@ def test_benchmarl_torch_backend_task() -> None:
 
 
 # ---------------------------------------------------------------------------------- CleanRL
-def test_cleanrl_ppo_example() -> None:
+def test_cleanrl_ppo_example(tmp_path: Path, capsys) -> None:
     example = load_example("cleanrl_ppo", "torch")
     # 8 copies x 32 steps = 256 steps x 5 agents, 20-step episodes, one update
-    result = example.main(["--quick", "--duration", "4"])
+    result = example.main(["--quick", "--duration", "4", "--out", str(tmp_path), *HELDOUT])
     assert result["rewards"].shape == (32, 8, 5)
     assert np.isfinite(result["rewards"]).all()
     check_returns(result["returns"], 20)
     assert result["parameters_changed"]
+    check_run_flies(result, tmp_path, capsys)
 
 
 # ---------------------------------------------------------------------------------- SB3
-def test_sb3_ppo_example() -> None:
+def test_sb3_ppo_example(tmp_path: Path, capsys) -> None:
     example = load_example("sb3_ppo", "stable_baselines3", "torch")
-    result = example.main(["--quick"])  # 1280 agent-steps, 100-step episodes
+    # 1280 agent-steps, 100-step episodes
+    result = example.main(["--quick", "--out", str(tmp_path), *HELDOUT])
     check_returns(result["returns"], 100)
     assert result["parameters_changed"]
+    check_run_flies(result, tmp_path, capsys)
 
 
 # ---------------------------------------------------------------------------------- RLlib

@@ -62,6 +62,12 @@ def test_frame_shape_dtype(size, show_ticks):
     assert image.flags.c_contiguous
 
 
+def test_uavs_are_labelled_from_one_as_in_every_figure():
+    renderer = TopViewRenderer(SCENARIO, 320, 320)
+    draw(renderer)
+    assert [label.get_text() for label in renderer._labels] == ["1", "2", "3", "4", "5"]
+
+
 def test_frame_is_not_blank():
     image = draw(TopViewRenderer(SCENARIO, 320, 320))
     colours = np.unique(image.reshape(-1, 3), axis=0)

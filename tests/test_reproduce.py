@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import numpy as np
 import pytest
@@ -25,7 +26,7 @@ VARIANT_KEYS = {
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("paper")
-    argv = ["reproduce", "--seeds", "2", "--duration", "20", "--quiet", "--out", str(out)]
+    argv = ["reproduce", "--seeds", "2", "--quick", "--quiet", "--out", str(out)]  # 20 s
     assert cli_main(argv) == 0
     return out
 
@@ -65,6 +66,33 @@ def test_summary_has_every_key_and_observer_error_only_with_observer(quick_run):
             assert 0 < s["observer_rms_error"] < 0.05
         else:
             assert s["observer_rms_error"] is None
+
+
+def test_report_reads_without_the_paper(quick_run):
+    """Names spelt out at their first use, the headline metric's direction, every symbol the
+    report uses defined in its reading guide, and no claim that a seed depends on its batch."""
+    report = (quick_run / "REPORT.md").read_text()
+    for name, expansion in (
+        ("PIO", "PIO (pigeon-inspired optimisation)"),
+        ("LFPIO", "LFPIO (Lévy-flight PIO)"),
+        ("NFTSMO", "NFTSMO (a non-singular fast terminal sliding-mode observer"),
+    ):
+        first = re.search(rf"\b{name}\b", report).start()
+        assert report.startswith(expansion, first), report[first : first + 80]
+    assert "## Table 2: triggered steps per UAV (fewer is better)" in report
+    guide = report[report.index("## How to read this report") : report.index("## Table 2")]
+    assert "**fewer is better**" in guide and "**lower is better**" in guide
+    for symbol in (
+        "**H0**",
+        "**case 1 / case 2**",
+        "**d^o**",
+        "**J_pre",
+        "**eq. 21**",
+        "**eq. 23**",
+    ):
+        assert symbol in guide, symbol
+    assert "depends on that seed alone" in report
+    assert "other seeds of its batch" not in report
 
 
 def test_figures_and_report(quick_run):

@@ -1,15 +1,17 @@
 """The ``uav-formation`` command line.
 
 - ``uav-formation reproduce --seeds 5 --out results/paper``: the paper's four variants
-  ({PIO, LFPIO} x {NFTSMO off, on}) on the same seeds: Table 2, Figs. 5-9, summary and report
+  ({PIO, LFPIO} x {NFTSMO off, on}) on the same seeds: Table 2, Figs. 5-10, summary and report
   (:mod:`uav_formation_env.reproduce`).
 - ``uav-formation evaluate --policy lfpio --observer on --seeds 5 --out results/eval``: one policy
-  (``lfpio``, ``pio``, ``pso``, ``heuristic``, ``random`` or a stable-baselines3 model path) over
-  seeds: per-step CSV and ``summary.json`` (:mod:`uav_formation_env.evaluation`).
+  (``lfpio``, ``pio``, ``pso``, ``exact``, ``nash``, ``heuristic``, ``random``, or a saved model:
+  a run directory, an SB3 ``.zip`` or a ``.pt``) over seeds: per-step CSV and ``summary.json``
+  (:mod:`uav_formation_env.evaluation`).
 - ``uav-formation render --policy lfpio --seed 0 --out episode.gif``: one episode as a GIF (or
   MP4 with the ``[video]`` extra).
 - ``uav-formation run --out results/run``: one episode of the heuristic controller.
-- ``uav-formation train``: hands over to the RL baselines (the ``[rl]`` extra).
+- ``uav-formation train --algo ppo --timesteps 20000 --out runs/ppo``: train a policy shared by
+  all UAVs into a run directory that ``evaluate --policy`` flies.
 
 A user error (a bad argument, a missing file, an invalid scenario) prints one line,
 ``uav-formation: error: ...``, and exits with status 2; ``--debug`` shows the traceback.
@@ -19,7 +21,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
+from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
@@ -237,8 +241,8 @@ def _evaluate(args: argparse.Namespace) -> int:
         batch.z[:, 0, :, :3],
         scenario if batch.scenes is None else batch.scenes[0],  # the first seed's drawn scene
         out / "trajectories.png",
-        title=f"{args.policy}, observer {'on' if scenario.observer.enabled else 'off'}, "
-        f"seed {batch.seeds[0]}",
+        title=f"{args.policy}{' + safety shield' if args.shield else ''}, observer "
+        f"{'on' if scenario.observer.enabled else 'off'}, seed {batch.seeds[0]}",
     )
     observer = "on" if scenario.observer.enabled else "off"
     shielded = " behind the safety shield" if args.shield else ""
@@ -428,13 +432,18 @@ def _add_common(parser: argparse.ArgumentParser, model_scenario: bool = False) -
     )
 
 
+def plain_text(docstring: str) -> str:
+    """A docstring as terminal text: ``:mod:`x``` -> x, ````x```` -> x."""
+    return re.sub(r":\w+:`([^`]*)`", r"\1", docstring).replace("``", "")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from uav_formation_env.policies.registry import POLICY_HELP
     from uav_formation_env.reproduce.nash_analysis import NASH_FIGURE
     from uav_formation_env.reproduce.variants import FIGURES
 
     parser = OneLineParser(
-        prog="uav-formation", description=__doc__, formatter_class=_HelpFormatter
+        prog="uav-formation", description=plain_text(__doc__), formatter_class=_HelpFormatter
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
@@ -477,6 +486,10 @@ def build_parser() -> argparse.ArgumentParser:
     render = sub.add_parser(
         "render",
         help="fly one episode and write it as a GIF (or MP4 with the [video] extra)",
+        description="Fly one episode of a policy and write its top view as an animation: "
+        "the UAVs (numbered 1..N, as UAV1..UAVN in the figures and reports) with their trails, "
+        "links and reference-velocity arrows, the obstacles with their safety circles, and "
+        "the time. A .gif needs nothing more; a .mp4 needs the [video] extra.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     render.add_argument("--policy", default="lfpio", help=POLICY_HELP)
@@ -485,6 +498,9 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--seed", type=integer_at_least(0), default=0, help="episode seed")
     render.add_argument("--observer", choices=["on", "off"], default=None, help="override")
     render.add_argument("--duration", type=positive_number, default=None, help="episode length [s]")
+    render.add_argument(
+        "--quick", action="store_true", help="20 s episode (a quick look; --duration wins)"
+    )
     render.add_argument("--fps", type=integer_at_least(1), default=10, help="frames per second")
     render.add_argument(
         "--every", type=integer_at_least(1), default=5, help="one frame every K steps"
@@ -524,28 +540,67 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(reproduce)
     reproduce.set_defaults(func=_reproduce)
 
-    # Listed here for --help only: main() hands every argument after "train" to the baselines.
+    # Listed here for --help only: main() hands every argument after "train" to _train.
     sub.add_parser(
         "train",
-        help="train PPO or SAC (SB3, the [rl] extra) or --algo rllib-ppo (RLlib, the [rllib] "
-        "extra) with one policy shared by all UAVs (`uav-formation train --help` for options)",
+        help=f"train one policy shared by all UAVs (--algo {', '.join(TRAINERS)}) into a run "
+        "directory that evaluate flies (`uav-formation train --help`)",
         add_help=False,
     )
     return parser
 
 
-def _train(argv: list[str]) -> int:
-    from uav_formation_env.extras import require
-
-    if "rllib-ppo" in argv:  # --algo rllib-ppo: the RLlib recipe, in its own environment
-        require("ray.rllib", "uav-formation train --algo rllib-ppo")
-        from uav_formation_baselines.rllib_ppo import main as rllib_main
-
-        return int(rllib_main(argv))
-    require("stable_baselines3", "uav-formation train")
+def _train_sb3(argv: list[str]) -> int:
+    """``--algo ppo|sac``, and the help of ``uav-formation train`` (it lists every trainer)."""
     from uav_formation_baselines.train import main as train_main
 
-    return int(train_main(argv))
+    return int(train_main(argv, prog="uav-formation train", algos=tuple(TRAINERS)))
+
+
+RLLIB_VENV = (
+    "--algo rllib-ppo runs in a virtual environment of its own: ray[rllib] 2.60 pins gymnasium "
+    "1.2.2, so installing it into this one would downgrade gymnasium here. `bash "
+    "tests/rllib/run.sh` builds .venv-rllib (and runs the RLlib smoke test); then run "
+    "`.venv-rllib/bin/uav-formation train --algo rllib-ppo ...` and evaluate its policy.pt in "
+    "any environment with torch (docs/integrations.md)"
+)
+
+
+def _train_rllib(argv: list[str]) -> int:
+    """``--algo rllib-ppo``: the RLlib recipe, where ray.rllib imports (its own venv)."""
+    from uav_formation_baselines.rllib_ppo import main as rllib_main
+
+    if not {"-h", "--help"} & set(argv):
+        try:
+            import ray.rllib  # noqa: F401 - present only in the RLlib venv
+        except ImportError as error:
+            raise UserError(f"{RLLIB_VENV} (here: {error})") from None
+    return int(rllib_main(argv))
+
+
+# --algo -> the trainer given every argument after "train". The in-process on-policy trainer
+# (uav_formation_baselines.onpolicy: ppo-fast, mappo) is added here as it lands.
+TRAINERS: dict[str, Callable[[list[str]], int]] = {
+    "ppo": _train_sb3,
+    "sac": _train_sb3,
+    "rllib-ppo": _train_rllib,
+}
+
+
+def _algo_of(argv: list[str]) -> str | None:
+    """The value of ``--algo`` in ``argv`` (``--algo X`` or ``--algo=X``), else None."""
+    for k, item in enumerate(argv):
+        if item == "--algo" and k + 1 < len(argv):
+            return argv[k + 1]
+        if item.startswith("--algo="):
+            return item.partition("=")[2]
+    return None
+
+
+def _train(argv: list[str]) -> int:
+    """``uav-formation train``: the trainer of ``--algo``; without one (or an unknown one) the
+    SB3 trainer's parser, which prints the help or the one-line error listing every trainer."""
+    return TRAINERS.get(_algo_of(argv) or "", _train_sb3)(argv)
 
 
 def _one_line(error: BaseException) -> str:

@@ -405,15 +405,18 @@ def plot_log_cost(
         if when is None or not np.isfinite(when):
             continue
         ax.axvline(when, color="0.4", ls=":", lw=1.0)
-        ax.annotate(
+        ax.annotate(  # above the axes, clear of the curves
             name,
             (when, 1.0),
+            xytext=(0, 3),
+            textcoords="offset points",
             xycoords=("data", "axes fraction"),
             rotation=90,
-            va="top",
-            ha="right",
+            va="bottom",
+            ha="center",
             fontsize=7,
             color="0.3",
+            annotation_clip=False,
         )
     ax.set_xlabel("t [s]")
     ax.set_ylabel(ylabel)
@@ -421,8 +424,18 @@ def plot_log_cost(
     # outside the axes, right of them: clear of the curves and of the event labels at the top
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8)
     if title:
-        ax.set_title(title)
+        ax.set_title(title, pad=70 if markers else 6)  # above the event labels
     return _save(fig, path)
+
+
+LINE_STYLES = ("-", "--", "-.", ":")
+
+
+def overlap_style(k: int, n: int) -> dict[str, object]:
+    """Line style and width of curve k of n that may lie exactly on one another (e.g. two
+    variants triggering at every step): earlier curves wider, each with its own dash, so a
+    curve drawn over another leaves it visible at both sides."""
+    return {"ls": LINE_STYLES[k % len(LINE_STYLES)], "lw": 1.2 + 1.6 * (n - 1 - k) / max(n - 1, 1)}
 
 
 def plot_trigger_timeline(
@@ -458,7 +471,13 @@ def plot_trigger_timeline(
     if cumulative:
         ax2 = axes[1, 0]
         for k, (label, curve) in enumerate(cumulative.items()):
-            ax2.plot(t, curve, color=VARIANT_COLORS[k % 6], lw=1.2, label=label)
+            ax2.plot(
+                t,
+                curve,
+                color=VARIANT_COLORS[k % 6],
+                label=f"{label} ({curve[-1]:.0f})",  # equal totals stay told apart
+                **overlap_style(k, len(cumulative)),
+            )
         ax2.set_ylabel("triggered steps")
         ax2.set_title(f"(b) cumulative triggers of {uav_label}", fontsize=10)
         ax2.grid(alpha=0.3)

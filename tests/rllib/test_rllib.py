@@ -53,6 +53,8 @@ def test_one_ppo_iteration_with_a_shared_module(run: Path) -> None:
     assert all(abs(r) < 1e6 for r in returns), returns  # raw returns are -2e11..-4e12
     assert config["parameters_changed"]
     assert (run / "checkpoint").is_dir() and (run / "progress.csv").is_file()
+    heldout = json.loads((run / "heldout.json").read_text())  # the end-of-training report
+    assert heldout["reference"] == "lfpio" and len(heldout["seeds"]) == 3
 
 
 def test_evaluate_from_the_exported_policy(run: Path, tmp_path: Path) -> None:

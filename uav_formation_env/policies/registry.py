@@ -43,6 +43,7 @@ __all__ = [
     "BatchPolicy",
     "SolverConfig",
     "make_policy",
+    "run_model_file",
     "solver_config",
 ]
 
@@ -73,9 +74,10 @@ POLICY_LABELS = {
 }
 POLICY_HELP = (
     f"{', '.join(DMPC_OPTIMIZERS)} (the reference DMPC with that solver), "
-    f"{', '.join(SIMPLE_POLICIES)}, a stable-baselines3 model path (.zip; a vecnormalize.pkl "
-    "beside it is applied), or a TorchScript policy (.pt, or a run directory holding policy.pt: "
-    "the RLlib recipe's export)"
+    f"{', '.join(SIMPLE_POLICIES)}, a run directory (uav-formation train's model.zip with its "
+    "vecnormalize.pkl, or the policy.pt of DAgger, BenchMARL, RLlib and the examples), a "
+    "stable-baselines3 model file (.zip; a vecnormalize.pkl beside it is applied) or a "
+    "TorchScript policy file (.pt)"
 )
 
 
@@ -98,6 +100,20 @@ def solver_config(optimizer: str | SolverConfig) -> SolverConfig:
         f"unknown optimizer {optimizer!r}: expected one of {sorted(DMPC_SOLVERS)} or a config "
         "object"
     )
+
+
+RUN_MODEL_FILES = ("policy.pt", "model.zip")  # what a run directory holds, in this order
+
+
+def run_model_file(path: Path) -> Path:
+    """The model file of a run directory (``policy.pt`` of the DAgger, BenchMARL, RLlib and
+    example recipes; ``model.zip`` beside ``vecnormalize.pkl`` of ``uav-formation train``), else
+    ``path`` itself."""
+    if path.is_dir():
+        for name in RUN_MODEL_FILES:
+            if (path / name).is_file():
+                return path / name
+    return path
 
 
 def make_policy(
@@ -127,9 +143,7 @@ def make_policy(
         return NashDMPCPolicy(scenario, key, seed=seed, random=random)
     if key in _SIMPLE:
         return _SIMPLE[key](scenario, seed)
-    path = Path(name)
-    if path.is_dir() and (path / "policy.pt").is_file():
-        path = path / "policy.pt"  # a run directory of the RLlib recipe
+    path = run_model_file(Path(name))
     if path.suffix == ".pt":
         exported = TorchScriptPolicy(path)
         exported.check_scenario(scenario)
@@ -138,6 +152,10 @@ def make_policy(
         policy = SB3Policy(path, algo)
         policy.check_scenario(scenario)
         return policy
+    if path.is_dir():
+        raise FileNotFoundError(
+            f"policy directory {name!r} holds no model: expected one of {list(RUN_MODEL_FILES)}"
+        )
     if path.suffix == ".zip" or len(path.parts) > 1:
         raise FileNotFoundError(f"policy model file not found: {name!r}")
     raise ValueError(

@@ -180,10 +180,10 @@ class TopViewRenderer:
             ax.text(
                 0.0,
                 0.0,
-                str(i),
+                str(i + 1),  # UAV1..UAVN, as every figure and report names them
                 ha="center",
                 va="center",
-                fontsize=6 if i >= 10 else 7,
+                fontsize=6 if i + 1 >= 10 else 7,
                 fontweight="bold",
                 color="white",
                 zorder=7,

@@ -23,6 +23,73 @@ def fmt_number(x: float | None, digits: int = 1) -> str:
     return f"{x:.{digits}f}"
 
 
+def reading_guide() -> list[str]:
+    """The "How to read this report" section: the paper's names spelt out, each metric with
+    what it measures and which way is better, and the symbols the tables use."""
+    return [
+        "## How to read this report",
+        "",
+        "The paper's swarm flies a V formation along a preset route past two obstacles "
+        "(O1, O2) under wind-like disturbances. Each UAV plans its next 1 s of inputs by "
+        "playing a game with its neighbours (distributed model-predictive control, DMPC: "
+        "each UAV minimises its own cost J_i given its neighbours' broadcast plans).",
+        "",
+        "- **PIO**: pigeon-inspired optimisation, the population-based search that solves "
+        "each UAV's planning problem.",
+        "- **LFPIO**: Lévy-flight PIO, the paper's contribution: PIO whose pigeons also make "
+        "occasional long (Lévy-distributed) jumps, to find better plans.",
+        "- **NFTSMO**: non-singular fast terminal sliding-mode observer, which estimates the "
+        'disturbance acting on each UAV so that the controller can cancel it. "+NFTSMO" in '
+        "a variant's name means the observer is on; without it the disturbance is not "
+        "compensated.",
+        "- **PSO** (particle swarm optimisation), **exact** (each UAV's best plan computed "
+        "exactly) and **nash** (the UAVs' best plans iterated until none can improve: a Nash "
+        "equilibrium) are further solvers of the same game, for comparison.",
+        "",
+        "Metrics, what they measure and which way is better:",
+        "",
+        "- **triggered steps** (Table 2): the control steps at which a UAV re-ran its "
+        "optimiser. A UAV re-plans only when the cost of keeping its previous plan (J_pre, "
+        "below) exceeds a threshold (10), so **fewer is better**: less computation and "
+        "communication for the same flight. The paper's headline result is that LFPIO with "
+        "the observer needs the fewest.",
+        "- **realised cost / UAV**: the sum over the episode of each UAV's stage cost J_i "
+        "(formation-keeping error, velocity-tracking error, control effort, obstacle terms); "
+        "**lower is better**.",
+        "- **min dist. to obstacle centre**: the closest any UAV came to an obstacle's "
+        "centre; **higher is safer** (the obstacle's radius is 30 m, its safety circle 40 m).",
+        "- **min separation**, **collisions**: the closest two UAVs came (higher is safer) "
+        "and the UAV-steps closer than the collision distance (**0 is the goal**).",
+        "- **observer rms**: the observer's error in estimating the disturbance; **lower is "
+        "better**.",
+        "- **formation RMSE**: how far UAVs are from their slots in the V; **lower is "
+        "better** (it includes the deliberate splits at obstacles).",
+        "- **mission completed**, **route error**: whether the swarm flew the route (every "
+        "obstacle on it met, no collision, route error within the limit); **more missions "
+        "and a smaller route error are better**.",
+        "- **Nash gap**: how much a UAV could still lower its own cost by changing its plan "
+        "alone; **lower is better** (0 = an equilibrium of the game).",
+        "- **s per episode**: the wall time of one episode on this machine; lower is faster.",
+        "",
+        "Symbols and paper references:",
+        "",
+        "- **J_i**: UAV i's cost in the game; **W**: the warm start, the UAV's previous plan "
+        "shifted by one step; **J_pre = J_i(W)**: the cost of keeping that plan, which the "
+        "trigger compares with the threshold.",
+        "- **H0**: the nominal formation (the V and its communication links) before and "
+        "after an obstacle.",
+        "- **case 1 / case 2**: how the swarm passes an obstacle: case 1, as one group "
+        "that keeps the V; case 2, split into two groups, one on each side.",
+        "- **d^o**: the detection distance: an obstacle affects the swarm once a UAV comes "
+        "within d^o (70 m) of its centre.",
+        "- **eq. 21**: the paper's disturbance model (sinusoids plus random noise of "
+        "amplitude 0.1); **eq. 23**: its preset velocity schedule, which defines the route.",
+        "- docs/model.md and docs/deviations.md (in the repository) explain every choice "
+        "the paper leaves open.",
+        "",
+    ]
+
+
 def difference_paragraphs(
     v: dict[str, Any],
     rows: dict[str, dict],
@@ -36,11 +103,12 @@ def difference_paragraphs(
     out.append(
         f"- **Mean over {n_seeds} seed(s) vs one run.** The paper reports a single run; "
         "we report the mean over seeds with the start positions drawn at random (x ∈ [0, 40] m, "
-        "y ∈ [−40, 40] m, docs/model.md §8: the paper does not give them) and the eq. 21 noise "
+        "y ∈ [−40, 40] m, docs/model.md §8: the paper does not give them) and the disturbance's "
+        "random noise (eq. 21) "
         "redrawn per seed. The spread between seeds (± above) is the scale on which a single "
-        "run can differ from our mean. A seed's episode also depends on the other seeds of its "
-        "batch: the DMPC's optimisers of all copies draw from one random generator, so seed 0 "
-        "of a 5-seed run is not seed 0 of a 10-seed run (same statistics, different samples)."
+        "run can differ from our mean. A seed's episode depends on that seed alone: every "
+        "copy of a batch, and every optimiser acting on it, draws from its own random stream, "
+        "so seed 0 flies the same alone, in a 5-seed run or in a 10-seed run."
     )
     for variant in ("pio", "lfpio"):
         if variant not in rows:
@@ -51,7 +119,7 @@ def difference_paragraphs(
             out.append(
                 f"- **{LABELS[variant]} without observer: every UAV triggered at all {n_steps} "
                 f"steps in every seed{', as in the paper' if full else ''}.** The uncompensated "
-                "disturbance keeps J_i(W) above the threshold 10."
+                "disturbance keeps the cost of the previous plan, J_i(W), above the threshold 10."
             )
         else:
             out.append(
@@ -146,8 +214,8 @@ def difference_paragraphs(
         act, res = events["O1"]["activate_s"], events["O1"]["restore_s"]
         out.append(
             f"- **O1 split at {fmt_number(act)} s (paper 10 s).** Detection when a UAV in the "
-            "obstacle strip comes within d^o = 70 m of the centre (docs/model.md §7, a proposed "
-            "value); "
+            "obstacle strip comes within the detection distance d^o = 70 m of the centre "
+            "(docs/model.md §7, a proposed value); "
             "the time depends on the random start box (the leading UAV starts at x ≤ 40 m)."
         )
         later = "" if res is None else f"; ours {res - 13.6:+.1f} s"
@@ -156,10 +224,9 @@ def difference_paragraphs(
             "say "
             "when a UAV has passed the obstacle. Our rule (docs/deviations.md §1): a group ends "
             "when none of its members is left in the obstacle strip (all abreast of the centre "
-            "or laterally clear), and H0 returns when every group has ended, so the restore "
-            "waits for the last member of the V (the V is 20 m deep). the calibration of "
-            "docs/model.md, with "
-            "the guide-abreast rule, found 15.2–15.6 s."
+            "or laterally clear), and the nominal formation H0 returns when every group has "
+            "ended, so the restore waits for the last member of the V (the V is 20 m deep). "
+            "The calibration of docs/model.md, with the guide-abreast rule, found 15.2–15.6 s."
         )
     if "O2" in events and events["O2"]["activate_s"] is not None:
         act = events["O2"]["activate_s"]
@@ -167,8 +234,8 @@ def difference_paragraphs(
             f"- **O2 encounter at {fmt_number(act)} s (paper 66.2 s).** After the turn at 50 s "
             "the V "
             "heads +y stretched along the track; when it meets O2 depends on where the formation "
-            "sits laterally after the turn and on d^o (docs/model.md §7: 63.6–69.8 s in "
-            "calibration, "
+            "sits laterally after the turn and on the detection distance d^o (docs/model.md §7: "
+            "63.6–69.8 s in calibration, "
             "depending on the weights)."
         )
     elif "O2" in events and full:
@@ -180,11 +247,11 @@ def difference_paragraphs(
     }
     if any(cases.values()):
         out.append(
-            "- **O2 split in some seeds** (paper: passed as one group, case 1): "
+            "- **O2 split in some seeds** (paper: passed as one group keeping the V, case 1): "
             + ", ".join(f"{k} {c}/{n_seeds}" for k, c in cases.items())
-            + ". When the V reaches O2 straddling the obstacle's centre line it splits (case 2) "
-            "as at O1; which case occurs depends on the swarm's lateral position relative to "
-            "O2 when it is detected."
+            + ". When the V reaches O2 straddling the obstacle's centre line it splits into two "
+            "groups (case 2) as at O1; which case occurs depends on the swarm's lateral "
+            "position relative to O2 when it is detected."
         )
     rms = [s["observer_rms_error"] for s in v.values() if s["observer_rms_error"] is not None]
     if rms:

@@ -81,27 +81,43 @@ def write_nash_table(rows: list[dict[str, Any]], path: str | Path) -> None:
 
 
 def nash_gap_figure(batches: dict[str, EpisodeBatch]) -> Figure:
-    """Fig. 10: log10 of the Nash gap over time, median over UAVs and seeds (in-box plans only).
-
-    The legend lies outside the axes, to the right of them, so it never covers a curve.
-    """
-    fig = Figure(figsize=(11, 4.5))
+    """Fig. 10: log10 of the Nash gap over time, median over UAVs and seeds (in-box plans only),
+    one panel per solver (lines that would lie on one another each get their own panel)."""
+    curves = {
+        variant_label(variant): (batch.t[:-1], _median_log_gap(batch))
+        for variant, batch in batches.items()
+        if batch.nash_gap is not None and batch.nash_in_box is not None
+    }
+    fig = Figure(figsize=(11, 1.6 * max(len(curves), 1) + 1.2))
     FigureCanvasAgg(fig)
-    ax = fig.subplots()
-    for variant, batch in batches.items():
-        if batch.nash_gap is None or batch.nash_in_box is None:
-            continue
-        gap = np.where(batch.nash_in_box, np.maximum(batch.nash_gap, 0.0), np.nan)
-        per_step = np.nanmedian(gap.reshape(len(gap), -1), axis=1)
-        ax.plot(batch.t[:-1], np.log10(per_step + 1e-12), lw=0.9, label=variant_label(variant))
-    ax.set_xlabel("t [s]")
-    ax.set_ylabel("log10 Nash gap (median over UAVs, seeds)")
-    ax.set_title("Distance of the plans from a Nash equilibrium of the horizon game")
-    ax.grid(alpha=0.3)
-    if ax.get_lines():
-        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
-    fig.tight_layout()  # shrinks the axes to leave the legend room in the figure
+    axes = fig.subplots(max(len(curves), 1), 1, sharex=True, sharey=True, squeeze=False)[:, 0]
+    for k, (label, (t, curve)) in enumerate(curves.items()):
+        ax = axes[k]
+        for other, (t_other, curve_other) in curves.items():  # the others, faint, to compare
+            if other != label:
+                ax.plot(t_other, curve_other, color="0.8", lw=0.6)
+        ax.plot(t, curve, color=f"C{k % 10}", lw=0.9)
+        ax.set_title(label, fontsize=9, loc="left")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("t [s]")
+    fig.supylabel("log10 Nash gap (median over UAVs, seeds)", fontsize=9)
+    fig.suptitle(
+        "Distance of the plans from a Nash equilibrium of the horizon game "
+        "(one panel per solver; the others in grey)"
+    )
+    fig.tight_layout()
     return fig
+
+
+def _median_log_gap(batch: EpisodeBatch) -> np.ndarray:
+    """(T,) log10 of the median in-box Nash gap over UAVs and seeds per step (NaN at a step
+    without an in-box plan)."""
+    gap = np.where(batch.nash_in_box, np.maximum(batch.nash_gap, 0.0), np.nan)
+    flat = gap.reshape(len(gap), -1)
+    median = np.full(len(flat), np.nan)
+    some = ~np.isnan(flat).all(axis=1)  # nanmedian of an all-NaN row warns
+    median[some] = np.nanmedian(flat[some], axis=1)
+    return np.log10(median + 1e-12)
 
 
 def plot_nash_gap(batches: dict[str, EpisodeBatch], path: str | Path) -> Path:

@@ -209,13 +209,25 @@ def _run_all(
             pending = set(futures)
             while pending:
                 with contextlib.suppress(queue_module.Empty):
-                    bar.update(channel.get(timeout=0.2))
+                    advance(bar, channel.get(timeout=0.2))
                 for future in [f for f in pending if f.done()]:
                     pending.discard(future)
                     variant, batch = future.result()
                     results[variant] = batch
         bar.close()
     return results
+
+
+def advance(bar: tqdm, steps: int) -> None:
+    """``bar.update(steps)``, except that the first steps restart the bar's clock: the start-up
+    (spawning the processes, imports, compilation) is not stepping, and counted as such it made
+    the first ETA read hours."""
+    if bar.n == 0:
+        bar.reset(total=bar.total)
+        bar.n = bar.last_print_n = int(steps)  # counted, but no rate from them
+        bar.refresh()
+    else:
+        bar.update(steps)
 
 
 def _run_all_ray(
