@@ -144,7 +144,8 @@ def test_velocity_policy_adapter_equals_the_episode_layers_inner_loop():
 def test_evaluation_scenario_keeps_the_observation_and_the_papers_rules():
     evaluation = evaluation_scenario(training_scenario("paper"))
     assert evaluation.observation.route_offset
-    assert evaluation.episode.reward == "raw" and evaluation.episode.action == "acceleration"
+    assert evaluation.episode.reward == "train" and evaluation.episode.action == "acceleration"
+    assert evaluation.episode.corridor_width == 0.0
     assert evaluation.collision.mode == "none"
 
 

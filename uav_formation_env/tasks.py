@@ -44,10 +44,13 @@ def training_scenario(
 
 
 def evaluation_scenario(scenario: Scenario) -> Scenario:
-    """``scenario`` as every evaluation flies it: the paper's episode rules (reward -J_i,
-    acceleration actions, no corridor) and collisions reported, not ending the episode; the
-    observation and the world kept. A policy trained in the velocity mode flies it through
+    """``scenario`` as every evaluation flies it: acceleration actions, no corridor, collisions
+    reported without ending the episode, the observation and the world kept. The reward stays
+    the training reward if it is one (unterminated, it scores any policy, the references
+    included, on the same scale), else -J_i. J_i is recorded either way. A policy trained in the
+    velocity mode flies it through
     :class:`~uav_formation_env.policies.action_modes.VelocitySetpointPolicy`."""
-    return replace(
-        scenario, episode=EpisodeConfig(), collision=replace(scenario.collision, mode="none")
-    )
+    episode = EpisodeConfig()
+    if scenario.episode.reward == "train":
+        episode = EpisodeConfig(reward="train", train=scenario.episode.train)
+    return replace(scenario, episode=episode, collision=replace(scenario.collision, mode="none"))
