@@ -572,11 +572,12 @@ def decode_local_observations(
     xp = namespace_of(obs)
     if not is_numpy(xp):
         obs = xp.astype(obs, xp.float64)
-    if obs.shape[-1] != dim:
+    if obs.shape[-1] not in (dim, dim + ROUTE_SLOTS):
         raise ValueError(
-            f"expected a last axis of {dim} (k={k}, m={m}, nearest={nearest}), got "
-            f"{tuple(obs.shape)}"
+            f"expected a last axis of {dim} (k={k}, m={m}, nearest={nearest}), or "
+            f"{dim + ROUTE_SLOTS} with the route slots, got {tuple(obs.shape)}"
         )
+    obs = obs[..., :dim]  # the route slots (observation.route_offset) are not decoded
     lead = tuple(obs.shape[:-1])
     slots = k + nearest
     end = OWN_DIM + NEIGHBOUR_DIM * slots
