@@ -30,22 +30,23 @@ def _terms(**values: float) -> CostTerms:
 
 def test_kernels_match_hand_computed_values():
     config, weights = TrainingRewardConfig(), CostConfig()  # q 1, r 5, n 10, s 30
-    # |v - v^d| = σ_v, Σ|ε|² = 3 σ_f², |u| = 0, no close pair, route error 2 σ_r, 5 m inside c
+    # |v - v^d| = σ_v, Σ|ε|² = 3 σ_f² over 3 neighbours, |u| = 0, no close pair, route error
+    # 2 σ_r, c - σ_c from the surface
     cost = _terms(
         velocity=weights.n * config.velocity_scale**2,
         formation=weights.q * 3 * config.formation_scale**2,
     )
     route = np.full((1, 1), 2 * config.route_scale)
     surface = np.full((1, 1), config.clearance_margin - config.clearance_scale)
-    terms = reward_terms(config, weights, cost, route, surface)
+    terms = reward_terms(config, weights, cost, route, surface, np.full((1, 1), 3.0))
     assert set(terms) == set(TERMS)
     expected = {
-        "velocity": 0.25 / 2,
-        "formation": 0.25 / 4,
-        "route": 0.25 / 5,
-        "energy": 0.05,
-        "separation": 0.1,
-        "clearance": 0.1 / 2,
+        "velocity": config.velocity / 2,
+        "formation": config.formation / 2,
+        "route": config.route / 5,
+        "energy": config.energy,
+        "separation": config.separation,
+        "clearance": config.clearance / 2,
     }
     for name, value in expected.items():
         assert terms[name][0, 0] == pytest.approx(value, rel=1e-12), name
@@ -54,7 +55,7 @@ def test_kernels_match_hand_computed_values():
 def test_perfect_step_pays_the_weights_and_termination_costs_the_penalty():
     config, weights = TrainingRewardConfig(), CostConfig()
     zero = np.zeros((2, 3))
-    terms = reward_terms(config, weights, _terms(), zero, np.full((2, 3), np.inf))
+    terms = reward_terms(config, weights, _terms(), zero, np.full((2, 3), np.inf), zero)
     reward = training_reward(terms, np.array([False, True]), config.termination_penalty)
     total = sum(getattr(config, name) for name in TERMS)
     np.testing.assert_allclose(reward[0], total)
@@ -64,7 +65,12 @@ def test_perfect_step_pays_the_weights_and_termination_costs_the_penalty():
 def test_a_term_whose_weight_is_zero_is_absent():
     weights = replace(CostConfig(), separation=0.0)
     terms = reward_terms(
-        TrainingRewardConfig(), weights, _terms(separation=5.0), np.zeros((1, 1)), np.zeros((1, 1))
+        TrainingRewardConfig(),
+        weights,
+        _terms(separation=5.0),
+        np.zeros((1, 1)),
+        np.zeros((1, 1)),
+        np.ones((1, 1)),
     )
     assert terms["separation"][0, 0] == TrainingRewardConfig().separation
 

@@ -464,8 +464,13 @@ class InitialStateConfig:
     velocity: Vec3 = (20.0, 0.0, 0.0)  # [m/s]
     # minimum distance between two UAVs at t = 0, 2.5x the default collision distance [m]
     min_spacing: float = 5.0
+    # None: uniform in the box (the paper's); a value: a start in formation, each UAV at its slot
+    # about the box's centre, moved by U(-jitter, jitter) on each horizontal axis [m]
+    formation_jitter: float | None = None
 
     def __post_init__(self) -> None:
+        if self.formation_jitter is not None:
+            _non_negative(self.formation_jitter, "initial.formation_jitter")
         _vec(self.position_low, 3, "initial.position_low")
         _vec(self.position_high, 3, "initial.position_high")
         _vec(self.velocity, 3, "initial.velocity")
@@ -597,8 +602,8 @@ class TrainingRewardConfig:
     the reward is O(1), positive, and ending an episode early stops paying:
 
     - J_i's terms, each normalised by its weight and a scale: ``velocity`` K(|v_i - v^d_i|², σ_v),
-      ``formation`` K(Σ_j h_ij |ε_ij|², σ_f), ``energy`` K(|u_i|², σ_u), ``separation``
-      K(Σ_j max(0, d_s - d_ij)², σ_s);
+      ``formation`` K(|ε_ij|² averaged over the UAVs j that i hears, σ_f), ``energy``
+      K(|u_i|², σ_u), ``separation`` K(Σ_j max(0, d_s - d_ij)², σ_s);
     - the mission's terms: ``route`` K(e_i², σ_r) with e_i UAV i's horizontal offset from its
       slot on the preset route, ``clearance`` K(max(0, c - D_i)², σ_c) with D_i the distance to
       the nearest obstacle surface;
@@ -606,14 +611,14 @@ class TrainingRewardConfig:
       collision in ``"terminate"`` mode, or leaving the corridor).
     """
 
-    velocity: float = 0.25  # weight of the velocity kernel [-]
-    formation: float = 0.25  # weight of the formation kernel [-]
+    velocity: float = 0.15  # weight of the velocity kernel [-]
+    formation: float = 0.35  # weight of the formation kernel [-]
     route: float = 0.25  # weight of the route kernel [-]
     energy: float = 0.05  # weight of the energy kernel [-]
     separation: float = 0.1  # weight of the separation kernel [-]
     clearance: float = 0.1  # weight of the obstacle clearance kernel [-]
-    velocity_scale: float = 2.0  # σ_v [m/s]
-    formation_scale: float = 10.0  # σ_f [m]
+    velocity_scale: float = 5.0  # σ_v [m/s]
+    formation_scale: float = 20.0  # σ_f [m]
     route_scale: float = 50.0  # σ_r [m]
     energy_scale: float = 2.0  # σ_u [m/s^2]
     separation_scale: float = 5.0  # σ_s [m]

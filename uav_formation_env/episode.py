@@ -543,8 +543,14 @@ class FormationEpisodes:
         offsets = route_offsets(self.sim, result)
         distance = self.xp.linalg.vector_norm(offsets, axis=-1)
         scenario = self.scenario
+        degree = self.xp.sum(self.xp.astype(result.adjacency != 0, distance.dtype), axis=-1)
         return reward_terms(
-            scenario.episode.train, scenario.cost, result.cost, distance, result.obstacle_distance
+            scenario.episode.train,
+            scenario.cost,
+            result.cost,
+            distance,
+            result.obstacle_distance,
+            degree,
         )
 
     def reward(self, cost: np.ndarray, penalty: np.ndarray) -> np.ndarray:

@@ -41,6 +41,7 @@ def reward_terms(
     cost: CostTerms,
     route_offset: Array,
     obstacle_distance: Array,
+    degree: Array,
 ) -> dict[str, Array]:
     """The weighted kernels of one step, per UAV.
 
@@ -50,6 +51,8 @@ def reward_terms(
         cost: (B, N) J_i's stage terms of the transition.
         route_offset: (B, N) horizontal distance of each UAV from its slot on the preset route [m].
         obstacle_distance: (B, N) distance to the nearest obstacle surface [m] (inf: none).
+        degree: (B, N) how many UAVs each one hears (Σ_j h_ij); the formation error is the
+            mean over them, so that its scale does not grow with the graph.
 
     Returns:
         name -> (B, N) weighted kernel, for the names of :data:`TERMS`.
@@ -59,7 +62,10 @@ def reward_terms(
     shortfall = xp.maximum(config.clearance_margin - obstacle_distance, zero)
     errors = {
         "velocity": (_unweighted(cost.velocity, weights.n), config.velocity_scale),
-        "formation": (_unweighted(cost.formation, weights.q), config.formation_scale),
+        "formation": (
+            _unweighted(cost.formation, weights.q) / xp.maximum(degree, 1.0),
+            config.formation_scale,
+        ),
         "route": (route_offset * route_offset, config.route_scale),
         "energy": (_unweighted(cost.energy, weights.r), config.energy_scale),
         "separation": (_unweighted(cost.separation, weights.separation), config.separation_scale),
