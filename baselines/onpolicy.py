@@ -20,9 +20,8 @@ from __future__ import annotations
 
 import argparse
 import csv
-import json
+import dataclasses
 import math
-import os
 import sys
 import time
 from collections import deque
@@ -35,6 +34,13 @@ import yaml
 
 from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.onpolicy_config import ONPOLICY_ALGOS, OnPolicyConfig, load_config
+from uav_formation_baselines.onpolicy_io import (
+    atomic_write,
+    export_policy,
+    load_actor,
+    policy_architecture,
+    read_policy,
+)
 from uav_formation_baselines.onpolicy_nets import ActorCritic, RunningNorm, TorchActorPolicy
 from uav_formation_env.cli import OneLineParser, integer_at_least
 from uav_formation_env.config import Scenario
@@ -116,7 +122,11 @@ class OnPolicyTrainer:
         frames: agent-steps to train for (rounded up to whole updates).
         out: run directory (created).
         device: ``"cpu"`` (numpy episode layer) or a CUDA device (torch episode layer).
-        init: a run directory to start from (its ``checkpoint.pt``), or None.
+        init: a run directory to start from (its ``checkpoint.pt``: actor, critic and
+            normalisers), or a policy directory (``policy.json`` + ``policy.npz``: the actor and
+            its observation statistics, whose architecture replaces ``hidden``, ``activation``
+            and ``obs_clip``), or None.
+        backend: the episode layer's array library (None: numpy on the CPU, torch elsewhere).
     """
 
     def __init__(
@@ -129,6 +139,7 @@ class OnPolicyTrainer:
         out: str | Path,
         device: str = "cpu",
         init: str | Path | None = None,
+        backend: str | None = None,
     ) -> None:
         if algo not in ONPOLICY_ALGOS:
             raise ValueError(f"algo must be one of {ONPOLICY_ALGOS}, got {algo!r}")
@@ -138,19 +149,28 @@ class OnPolicyTrainer:
                 f"ippo needs a fixed number of UAVs (one network per UAV); scenario "
                 f"{scenario.name!r} draws N in {low}..{high}: use ppo or mappo"
             )
+        self.init = "" if init is None else str(init)
+        policy_file = None
+        if init is not None and not (Path(init) / "checkpoint.pt").is_file():
+            policy_file = read_policy(Path(init))  # a policy directory: adopt its architecture
+            config = dataclasses.replace(config, **policy_architecture(*policy_file))
         torch.set_num_threads(config.threads)
         torch.manual_seed(seed)
         self.algo, self.scenario, self.config, self.seed = algo, scenario, config, int(seed)
         self.device = torch.device(device)
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
-        cuda = self.device.type == "cuda"
+        if backend is None:
+            backend = "numpy" if self.device.type == "cpu" else "torch"
+        if backend not in ("numpy", "torch") or (backend == "numpy" and self.device.type != "cpu"):
+            raise ValueError(f"backend must be 'torch' on {self.device}, or 'numpy' on the CPU")
+        self.backend = backend
         self.episodes = FormationEpisodes(
             scenario,
             batch_size=config.copies,
             autoreset=True,
-            backend="torch" if cuda else "numpy",
-            device=self.device if cuda else None,
+            backend=backend,
+            device=self.device if backend == "torch" else None,
         )
         self.step = self.episodes.reset(seed=TRAIN_SEED_BASE * (self.seed + 1))
         B, N = config.copies, self.episodes.n_uav
@@ -158,15 +178,24 @@ class OnPolicyTrainer:
         S = int(self.episodes.state().shape[-1])
         self.n_agents, self.obs_dim = N, D
         self.model = ActorCritic(
-            algo, D, N, S, config.hidden, config.activation, config.log_std_init, config.obs_clip
+            algo,
+            D,
+            N,
+            S,
+            config.hidden,
+            config.activation,
+            config.log_std_init,
+            config.obs_clip,
+            config.value_norm,
         ).to(self.device)
-        self.init = "" if init is None else str(init)
-        if init is not None:
+        if policy_file is not None:
+            load_actor(self.model, *policy_file)
+        elif init is not None:
             self._load_init(Path(init))
         else:  # first statistics from the reset observations
             self.model.obs_norm.update(self._tensor(self.step.observation))
-            if algo == "mappo":
-                self.model.state_norm.update(self._tensor(self.episodes.state()))
+        if algo == "mappo" and (init is None or policy_file is not None):  # a fresh critic
+            self.model.state_norm.update(self._tensor(self.episodes.state()))
         self.anchor = [p.detach().clone() for p in self.model.actor.parameters()]
         self.optimizer = torch.optim.Adam(
             self.model.parameters(), lr=config.learning_rate, eps=1e-5
@@ -199,7 +228,7 @@ class OnPolicyTrainer:
         return torch.as_tensor(array, dtype=dtype, device=self.device)
 
     def _env_actions(self, actions: torch.Tensor) -> Any:
-        return actions if self.device.type == "cuda" else actions.numpy()
+        return actions if self.backend == "torch" else actions.numpy()
 
     def _state(self, result: Any = None) -> torch.Tensor | None:
         if self.algo != "mappo":
@@ -268,11 +297,16 @@ class OnPolicyTrainer:
             self.buf_rew, self.buf_val, self.buf_done[..., None], self.next_value,
             cfg.gamma, cfg.gae_lambda,
         )  # fmt: skip
+        if cfg.value_norm:  # the critic's targets in units of the returns seen so far
+            model.value_norm.update(returns.reshape(-1, 1))
         rows = (-1, N) if self.algo == "ippo" else (-1,)
         b_obs = self.buf_obs.reshape(*rows, self.obs_dim)
         b_act = self.buf_act.reshape(*rows, 3)
         b_logp, b_adv = self.buf_logp.reshape(rows), advantages.reshape(rows)
-        b_ret, b_val = returns.reshape(rows), self.buf_val.reshape(rows)
+        b_ret, b_val = (
+            model.normalise(returns.reshape(rows)),
+            model.normalise(self.buf_val.reshape(rows)),
+        )
         # the normalisers are frozen during an update: normalise every row once
         with torch.no_grad():
             b_norm = model.obs_norm(b_obs)
@@ -316,7 +350,10 @@ class OnPolicyTrainer:
                     loss = loss + cfg.init_reg * pull
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.max_grad_norm)
+                # each network clipped on its own: a critic far from the returns early on
+                # does not shrink the actor's step
+                torch.nn.utils.clip_grad_norm_(model.actor_parameters(), cfg.max_grad_norm)
+                torch.nn.utils.clip_grad_norm_(model.critic.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
                 with torch.no_grad():
                     approx_kl = float(((ratio - 1) - log_ratio).mean())
@@ -366,16 +403,16 @@ class OnPolicyTrainer:
     def save(self) -> None:
         """Policy files, checkpoint and config.yaml, each replaced atomically."""
         meta = self.metadata()
-        _export(self.out, self.model, self.scenario, meta)
+        export_policy(self.out, self.model, self.scenario, meta)
         checkpoint = {
             "model": self.model.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "frames": int(self.frames),
             "update": int(self.update_index),
         }
-        _atomic(self.out / "checkpoint.pt", lambda path: torch.save(checkpoint, path))
+        atomic_write(self.out / "checkpoint.pt", lambda path: torch.save(checkpoint, path))
         config = {**meta, "hyperparams": self.config.as_dict()}
-        _atomic(
+        atomic_write(
             self.out / "config.yaml",
             lambda path: path.write_text(yaml.safe_dump(config, sort_keys=False)),
         )
@@ -445,39 +482,6 @@ class OnPolicyTrainer:
         return {**self.metadata(), **self.last_eval}
 
 
-def _atomic(path: Path, write) -> None:
-    """Write ``path`` through a temporary file in its directory and ``os.replace``."""
-    temporary = path.with_name(f".{path.name}.tmp")
-    write(temporary)
-    os.replace(temporary, path)
-
-
-def _export(directory: Path, model: ActorCritic, scenario: Scenario, meta: dict[str, Any]) -> None:
-    """Write ``policy.json`` and ``policy.npz`` (docs: the learned-policy file format v1)."""
-    arrays = model.exported_arrays()
-    header = {
-        "format": "uav-formation-policy",
-        "version": 1,
-        "observation_dim": int(model.obs_norm.dim),
-        "observation": scenario.observation.kind,
-        "activation": model.activation,
-        "members": 1,
-        "layers": len(model.actor.linears()),
-        "observation_clip": float(model.obs_norm.clip),
-        "action": "clip",
-        **meta,
-    }
-    if model.algo == "ippo":  # one network per UAV: weights (N, out, in), biases (N, out)
-        header["agents"] = model.n_agents
-
-    def write_npz(path: Path) -> None:
-        with open(path, "wb") as stream:
-            np.savez(stream, **arrays)
-
-    _atomic(directory / "policy.npz", write_npz)
-    _atomic(directory / "policy.json", lambda path: path.write_text(json.dumps(header, indent=2)))
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(
         prog="python -m uav_formation_baselines.onpolicy",
@@ -494,6 +498,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--out", required=True, help="run directory")
     parser.add_argument("--device", default="cpu", help="cpu (numpy episodes) or cuda[:k]")
+    parser.add_argument(
+        "--backend", choices=("numpy", "torch"), default=None,
+        help="the episode layer's arrays (default: numpy on cpu, torch on cuda)",
+    )  # fmt: skip
     parser.add_argument("--eval-every", type=integer_at_least(0), default=None, help="updates")
     parser.add_argument("--eval-seeds", type=integer_at_least(1), default=None)
     parser.add_argument("--init", default=None, help="run directory to start from")
@@ -533,7 +541,15 @@ def main(argv: list[str] | None = None) -> int:
         config = load_config(args.algo, overrides, args.hyperparams)
         scenario = build_scenario(args.task, config)
         trainer = OnPolicyTrainer(
-            args.algo, scenario, config, args.seed, args.frames, args.out, args.device, args.init
+            args.algo,
+            scenario,
+            config,
+            args.seed,
+            args.frames,
+            args.out,
+            args.device,
+            args.init,
+            args.backend,
         )
     except ValueError as error:
         print(f"uav-formation: error: {error}", file=sys.stderr)

@@ -44,6 +44,7 @@ class OnPolicyConfig:
     gae_lambda: float = 0.95
     clip_coef: float = 0.2
     clip_vloss: bool = False
+    value_norm: bool = True  # critic targets normalised by running return statistics
     ent_coef: float = 0.0
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
@@ -83,7 +84,8 @@ class OnPolicyConfig:
             raise ValueError(f"log_std_init must be a number, got {self.log_std_init!r}")
         if self.target_kl is not None and (not _real(self.target_kl) or self.target_kl <= 0):
             raise ValueError(f"target_kl must be a positive number or null, got {self.target_kl!r}")
-        for name in ("anneal_lr", "clip_vloss", "norm_adv", "reward_scaling", "training_devices"):
+        flags = ("anneal_lr", "clip_vloss", "value_norm", "norm_adv", "reward_scaling")
+        for name in (*flags, "training_devices"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         hidden = self.hidden

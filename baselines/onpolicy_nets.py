@@ -110,8 +110,10 @@ class ActorCritic(nn.Module):
         obs_dim: one agent's observation width.
         n_agents: N (the one-hot width of MAPPO, the agent axis of IPPO).
         state_dim: the global state's width (MAPPO; else ignored).
-        hidden, activation, log_std_init, obs_clip: see
-            :class:`~uav_formation_baselines.onpolicy_config.OnPolicyConfig`.
+        hidden, activation, log_std_init, obs_clip, value_norm: see
+            :class:`~uav_formation_baselines.onpolicy_config.OnPolicyConfig`; with
+            ``value_norm`` the critic predicts values in units of the running return statistics
+            (:meth:`value` converts them back).
     """
 
     def __init__(
@@ -124,9 +126,12 @@ class ActorCritic(nn.Module):
         activation: str,
         log_std_init: float,
         obs_clip: float,
+        value_norm: bool = False,
     ) -> None:
         super().__init__()
         self.algo, self.n_agents, self.activation = algo, int(n_agents), activation
+        self.normalise_values = bool(value_norm)
+        self.value_norm = RunningNorm(1, math.inf)  # returns' statistics (value_norm=True)
         agents = self.n_agents if algo == "ippo" else None
         self.obs_norm = RunningNorm(obs_dim, obs_clip)
         self.actor = MLP(obs_dim, hidden, ACTIONS, activation, agents, 0.01)
@@ -186,7 +191,25 @@ class ActorCritic(nn.Module):
         agent: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """(...,) value of each row (see :meth:`critic_input`)."""
-        return self.critic(self.critic_input(obs, state, agent)).squeeze(-1)
+        return self.denormalise(self.critic(self.critic_input(obs, state, agent)).squeeze(-1))
+
+    def normalise(self, values: torch.Tensor) -> torch.Tensor:
+        """Values in the critic's output units (identity without ``value_norm``)."""
+        if not self.normalise_values:
+            return values
+        norm = self.value_norm
+        return (values - norm.mean.float()) / norm.std().float()
+
+    def denormalise(self, output: torch.Tensor) -> torch.Tensor:
+        """The critic's output in return units (identity without ``value_norm``)."""
+        if not self.normalise_values:
+            return output
+        norm = self.value_norm
+        return output * norm.std().float() + norm.mean.float()
+
+    def actor_parameters(self) -> list[nn.Parameter]:
+        """The actor's parameters (its MLP and the log std)."""
+        return [*self.actor.parameters(), self.log_std]
 
     def values_of_copies(self, obs: torch.Tensor, state: torch.Tensor | None) -> torch.Tensor:
         """(B, N) values of copies' observations (B, N, dim) and states (B, S)."""
