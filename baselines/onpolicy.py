@@ -45,9 +45,10 @@ from uav_formation_baselines.onpolicy_nets import ActorCritic, RunningNorm, Torc
 from uav_formation_env.cli import OneLineParser, integer_at_least
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
-from uav_formation_env.episode import TRAINING_DEVICES, FormationEpisodes, global_state
+from uav_formation_env.episode import FormationEpisodes, global_state
 from uav_formation_env.evaluation import run_episodes, summarise
 from uav_formation_env.scenes import n_uav_range
+from uav_formation_env.tasks import training_scenario
 
 TRAIN_SEED_BASE = 1_000_000  # training copies' first seeds: seed * BASE + BASE + b
 PROGRESS_COLUMNS = (
@@ -95,10 +96,11 @@ def bootstrap_truncated(
 
 
 def build_scenario(task: str | Path | Scenario, config: OnPolicyConfig) -> Scenario:
-    """The training scenario: the task, with ``TRAINING_DEVICES`` if asked, then ``config.env``."""
+    """The training scenario: the task, under the training preset unless ``reward`` is
+    ``"paper"`` (:func:`uav_formation_env.tasks.training_scenario`), then ``config.env``."""
     scenario = resolve_scenario(task)
-    if config.training_devices:
-        scenario = with_overrides(scenario, TRAINING_DEVICES)
+    if config.reward == "train":
+        scenario = training_scenario(scenario)
     if config.env:
         scenario = with_overrides(scenario, config.env)
     return scenario
@@ -396,7 +398,7 @@ class OnPolicyTrainer:
             "wall_time_s": round(self.wall, 2),
             "scenario": self.scenario.name,
             "training_reward": self.scenario.episode.reward,
-            "action_mode": getattr(self.scenario.episode, "action_mode", "acceleration"),
+            "action_mode": self.scenario.episode.action,
             "seed": self.seed,
         }
 

@@ -60,7 +60,7 @@ class OnPolicyConfig:
     eval_every: int = 10  # updates between evaluations (0: only at the end)
     eval_seeds: int = 8  # held-out evaluation episodes
     eval_seed_start: int = 1000  # first evaluation seed (training copies draw from 10^6 on)
-    training_devices: bool = False  # apply uav_formation_env.episode.TRAINING_DEVICES
+    reward: str = "train"  # "train": the task under tasks.TRAINING_PRESET; "paper": -J_i
     env: Mapping[str, Any] = field(default_factory=dict)  # scenario overrides (with_overrides)
 
     def __post_init__(self) -> None:
@@ -85,7 +85,9 @@ class OnPolicyConfig:
         if self.target_kl is not None and (not _real(self.target_kl) or self.target_kl <= 0):
             raise ValueError(f"target_kl must be a positive number or null, got {self.target_kl!r}")
         flags = ("anneal_lr", "clip_vloss", "value_norm", "norm_adv", "reward_scaling")
-        for name in (*flags, "training_devices"):
+        if self.reward not in ("train", "paper"):
+            raise ValueError(f"reward must be 'train' or 'paper', got {self.reward!r}")
+        for name in flags:
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         hidden = self.hidden

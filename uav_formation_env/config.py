@@ -619,7 +619,7 @@ class TrainingRewardConfig:
     clearance: float = 0.1  # weight of the obstacle clearance kernel [-]
     velocity_scale: float = 5.0  # σ_v [m/s]
     formation_scale: float = 20.0  # σ_f [m]
-    route_scale: float = 50.0  # σ_r [m]
+    route_scale: float = 30.0  # σ_r [m]
     energy_scale: float = 2.0  # σ_u [m/s^2]
     separation_scale: float = 5.0  # σ_s [m]
     clearance_margin: float = 10.0  # c, clearance wanted from an obstacle's surface [m]
