@@ -13,16 +13,16 @@ import pytest
 import torch
 import yaml
 
-from uav_formation_baselines.onpolicy import (
+from uav_formation_baselines.onpolicy import main
+from uav_formation_baselines.onpolicy_config import OnPolicyConfig, load_config
+from uav_formation_baselines.onpolicy_io import export_policy
+from uav_formation_baselines.onpolicy_nets import ActorCritic, TorchActorPolicy
+from uav_formation_baselines.onpolicy_trainer import (
     OnPolicyTrainer,
     bootstrap_truncated,
     build_scenario,
     gae,
-    main,
 )
-from uav_formation_baselines.onpolicy_config import OnPolicyConfig, load_config
-from uav_formation_baselines.onpolicy_io import export_policy
-from uav_formation_baselines.onpolicy_nets import ActorCritic, TorchActorPolicy
 from uav_formation_env.config_io import resolve_scenario
 
 TINY = {
