@@ -384,6 +384,10 @@ class OnPolicyTrainer:
             "scenario": self.scenario.name,
             "training_reward": self.scenario.episode.reward,
             "action_mode": self.scenario.episode.action,
+            # what evaluation needs to fly the policy (policies.action_modes, the route slots)
+            "velocity_range": self.scenario.episode.velocity_range,
+            "velocity_gain": self.scenario.episode.velocity_gain,
+            "route_offset": self.scenario.observation.route_offset,
             "seed": self.seed,
         }
 
