@@ -3,8 +3,10 @@
 Prints, per optimiser and observer setting: seconds per 1000-step episode and per control step
 (policy alone and policy + simulator), trigger counts per UAV (docs/model.md §8, Table 2), the
 minimum distance to the obstacle centres, and collisions (two UAVs closer than the scenario's 2 m).
-Seeds run one after another as B = 1 episodes, or all at once as B copies with ``--batched``
-(one optimiser call per step for every copy: seconds per episode = wall time / B).
+Before the timed episodes of each optimiser and observer setting, a throwaway 2-step run loads
+the compiled kernels (printed as the warm-up). Seeds run one after another as B = 1 episodes,
+or all at once as B copies with ``--batched`` (one optimiser call per step for every copy:
+seconds per episode = wall time / B).
 
     python benchmarks/bench_policy.py [--optimizers pio lfpio] [--observer on off]
                                       [--seeds 0 1] [--batched] [--steps 1000]
@@ -54,7 +56,7 @@ def episode(
     min_centre = np.full(len(seeds), np.inf)
     min_sep = np.full(len(seeds), np.inf)
     collision_steps = np.zeros(len(seeds), dtype=int)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         actions = policy.act_batch(observe(sim, result))
         result = sim.step(actions * sim.u_max)
@@ -62,10 +64,11 @@ def episode(
         min_centre = np.minimum(min_centre, centre.min(axis=(1, 2), initial=np.inf))
         min_sep = np.minimum(min_sep, result.min_separation.min(axis=1))
         collision_steps += (result.min_separation < scenario.collision.uav_distance).any(axis=1)
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     records = policy.records()
     return {
         "wall": wall,
+        "cpu": cpu,
         "policy": float(records.wall_time.sum()),
         "triggers": policy.trigger_counts(),
         "evaluations": records.evaluations.sum(axis=(0, 2)),
@@ -95,31 +98,40 @@ def main() -> None:
     overrides = {k: yaml.safe_load(v) for k, v in (item.split("=", 1) for item in args.set)}
     groups = [args.seeds] if args.batched else [[s] for s in args.seeds]
     print(
-        f"{'optimizer':>9} {'obs':>3} {'seeds':>10} {'s/episode':>9} {'ms/step':>8} "
+        f"{'optimizer':>9} {'obs':>3} {'seeds':>10} {'s/episode':>9} {'cpu s':>6} {'ms/step':>8} "
         f"{'policy ms':>9} {'triggers per UAV (mean over copies)':>38} {'mean':>6} "
         f"{'min d_o':>7} {'min sep':>7} {'coll':>4}"
     )
     for optimizer in args.optimizers:
         for observer in args.observer:
+            # the compiled kernels' one-time load (numba's cache) in a throwaway run, so that
+            # s/episode is the episode's own cost
+            warm = episode(
+                optimizer, observer == "on", groups[0], 2, args.population_cost, overrides
+            )
+            print(f"{'':>24} warm-up (2 steps, kernels loaded): {warm['wall']:.2f} s")
             for seeds in groups:
                 out = episode(
                     optimizer, observer == "on", seeds, args.steps, args.population_cost, overrides
                 )
                 b = len(seeds)
                 per_episode = out["wall"] / b * 1000 / args.steps
+                cpu_episode = out["cpu"] / b * 1000 / args.steps
                 per_step = 1e3 * out["wall"] / args.steps / b
                 policy_step = 1e3 * out["policy"] / args.steps / b
                 triggers = out["triggers"].mean(axis=0)
                 print(
                     f"{optimizer:>9} {observer:>3} {','.join(map(str, seeds)):>10} "
-                    f"{per_episode:>9.2f} {per_step:>8.2f} {policy_step:>9.2f} "
+                    f"{per_episode:>9.2f} {cpu_episode:>6.2f} {per_step:>8.2f} {policy_step:>9.2f} "
                     f"{' / '.join(f'{t:.1f}' for t in triggers):>38} {triggers.mean():>6.1f} "
                     f"{out['min_centre'].min():>7.2f} {out['min_sep'].min():>7.2f} "
                     f"{int(out['collision_steps'].sum()):>4}"
                     + (f"  per copy {out['collision_steps'].tolist()}" if b > 1 else "")
                 )
     print(
-        "s/episode and ms/step are per copy (wall / B), scaled to 1000 steps; 'policy ms' is "
+        "s/episode and ms/step are per copy (wall / B), scaled to 1000 steps; 'cpu s' is the "
+        "process's CPU time per episode (user + system: what a busy shared machine inflates "
+        "least); 'policy ms' is "
         "NashDMPCPolicy.act_batch alone; min d_o = minimum distance to an obstacle centre [m]; "
         "min sep = minimum UAV separation [m]; coll = copy-steps with two UAVs closer than 2 m."
     )

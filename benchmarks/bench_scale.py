@@ -9,9 +9,11 @@ family):
   observations included), and UAV-steps/s (env-steps/s x N) at B = 256: flat when the step's
   cost grows linearly in N;
 * the reference DMPC (LFPIO) ms per control step at B = 1, and per UAV-step;
-* every figure as a ratio to N = 5 measured in the same run.
+* every figure as a ratio to N = 5 measured in the same run;
+* seconds to build and validate ``swarm_scenario(N)`` for the ``--build`` sizes (median of 5).
 
     python benchmarks/bench_scale.py [--sizes 5 10 20 50 100] [--seconds 2] [--dmpc-steps 5]
+                                     [--build 1000]
 
 The issue's targets: a DMPC cost per UAV-step at N = 100 within 10x of N = 5, and an env step
 whose cost grows at most linearly in N.
@@ -20,6 +22,7 @@ whose cost grows at most linearly in N.
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 
 import numpy as np
@@ -56,12 +59,31 @@ def dmpc_ms(scenario, steps: int) -> float:
     return 1e3 * (time.perf_counter() - start) / steps
 
 
+def build_seconds(n_uav: int, repeats: int = 5) -> tuple[float, float]:
+    """Median wall and CPU seconds of ``swarm_scenario(n_uav)`` (the shape, its graph and the
+    validation)."""
+    walls, cpus = [], []
+    for _ in range(repeats):
+        start, cpu = time.perf_counter(), time.process_time()
+        swarm_scenario(n_uav)
+        walls.append(time.perf_counter() - start)
+        cpus.append(time.process_time() - cpu)
+    return statistics.median(walls), statistics.median(cpus)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[5, 10, 20, 50, 100])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[5, 10, 20, 50, 100])
     parser.add_argument("--seconds", type=float, default=2.0, help="per env measurement")
     parser.add_argument("--dmpc-steps", type=int, default=5, help="timed DMPC steps per N")
+    parser.add_argument("--build", type=int, nargs="*", default=[1000], help="N of build rows")
     args = parser.parse_args()
+    for n in args.build:
+        wall, cpu = build_seconds(n)
+        print(
+            f"swarm_scenario({n}) built and validated: {wall:.3f} s wall, {cpu:.3f} s CPU "
+            "(medians of 5)"
+        )
     rows = []
     for n in args.sizes:
         scenario = swarm_scenario(n)
@@ -74,6 +96,8 @@ def main() -> None:
             )
         )
         print(f"measured N = {n}", flush=True)
+    if not rows:
+        return
     base = rows[0]
     print(
         f"\n| N | env-steps/s B=1 | (vs N={base[0]}) | env-steps/s B=256 | (vs N={base[0]}) "

@@ -86,3 +86,43 @@ def test_degree_is_bounded_whatever_n():
 def test_bad_arguments_are_named(call, pattern):
     with pytest.raises(ValueError, match=pattern):
         call()
+
+
+def _norm_graph(offsets: np.ndarray, k: int) -> np.ndarray:
+    """k_nearest_adjacency with the distances of np.linalg.norm (the formula it computes axis by
+    axis), as a reference."""
+    p = offsets[:, :3]
+    n = len(p)
+    distance = np.linalg.norm(p[:, None] - p[None], axis=-1)
+    np.fill_diagonal(distance, np.inf)
+    adjacency = np.zeros((n, n), dtype=np.int64)
+    nearest = np.argpartition(distance, k - 1, axis=1)[:, :k]
+    adjacency[np.repeat(np.arange(n), k), nearest.ravel()] = 1
+    from uav_formation_env.formations import _minimum_spanning_edges
+
+    tree = _minimum_spanning_edges(distance)
+    adjacency[tree[:, 0], tree[:, 1]] = 1
+    adjacency = adjacency | adjacency.T
+    np.fill_diagonal(adjacency, 0)
+    return adjacency
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+def test_k_nearest_distances_are_the_norms(shape: str) -> None:
+    rng = np.random.default_rng(1)
+    offsets = formation_offsets(shape, 37, 10.0)
+    offsets[:, :3] += rng.normal(scale=0.7, size=(37, 3))  # no ties
+    np.testing.assert_array_equal(k_nearest_adjacency(offsets, 3), _norm_graph(offsets, 3))
+
+
+@pytest.mark.parametrize(
+    "value, valid", [(1, True), (True, True), (1.0, True), (2, False), (-1, False), (0.5, False)]
+)
+def test_adjacency_entries_are_checked_whatever_their_type(value, valid: bool) -> None:
+    rows = ((0, value), (1, 0))
+    offsets = PAPER_OFFSETS[:2]
+    if valid:
+        FormationConfig(offsets, rows)
+    else:
+        with pytest.raises(ValueError, match="entries must be 0 or 1"):
+            FormationConfig(offsets, rows)

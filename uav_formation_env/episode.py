@@ -179,6 +179,9 @@ def _encode_layout(sim: FormationSim, result: StepResult) -> tuple[np.ndarray, n
     """The observation layout of ``scenario.observation.kind`` (without the route slots)."""
     scenario = sim.scenario
     config = scenario.observation
+    fast = None if sim.fast_path is None else sim.fast_path.observation(result)
+    if fast is not None:  # the same numbers, computed in the simulator's compiled step
+        return fast, None
     if config.kind == "local":
         field = sim.field
         next_velocity, wait = next_leg(sim.schedule, result.t)

@@ -33,6 +33,7 @@ from dataclasses import dataclass, fields, is_dataclass, replace
 
 import numpy as np
 
+from uav_formation_env import fast_step
 from uav_formation_env.config import Scenario
 from uav_formation_env.core import counter_rng, topology
 from uav_formation_env.core.array_api import (
@@ -254,6 +255,8 @@ class FormationSim:
                 self.schedule = self._put_fields(self.schedule)
             self.observer = self._put_fields(self.observer)
             self.topology = self._put_fields(self.topology)
+        # the compiled step of the same numbers (fast_step.py), where it applies
+        self.fast_path = fast_step.attach(self, StepResult)
 
     # ------------------------------------------------------------------ backend
     def _put(self, values):
@@ -385,6 +388,8 @@ class FormationSim:
             raise ValueError(f"u_n must have shape {expected}, got {tuple(u_n.shape)}")
         if not bool(xp.isfinite(u_n).all()):  # the method: numpy's xp.all adds a Python layer
             raise ValueError("u_n contains NaN or infinite values")
+        if self.fast_path is not None:
+            return self.fast_path.step(u_n)
         obs_cfg = self.scenario.observer
         # minimum(maximum(.)) is clip for finite values, without numpy's Python wrappers
         u_max = self.u_max
