@@ -30,6 +30,9 @@ TRAINING_PRESET: dict[str, Any] = {
     "episode__reward": "train",
     "episode__action": "velocity",
     "episode__corridor_width": 150.0,  # [m]: the mission allows 100 m of route error
+    # the first reset spreads the copies over the mission (episode.start), so that every
+    # rollout holds every phase of it, not B copies of the same seconds
+    "episode__start": "staggered",
     "collision__mode": "terminate",
     "observation__route_offset": True,
 }
