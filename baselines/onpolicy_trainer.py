@@ -134,6 +134,8 @@ class OnPolicyTrainer:
                 f"ippo needs a fixed number of UAVs (one network per UAV); scenario "
                 f"{scenario.name!r} draws N in {low}..{high}: use ppo or mappo"
             )
+        if config.init_reg > 0 and init is None:
+            raise ValueError("init_reg pulls the actor towards its --init weights: give --init")
         self.init = "" if init is None else str(init)
         policy_file = None
         if init is not None and not (Path(init) / "checkpoint.pt").is_file():

@@ -194,3 +194,21 @@ def test_torch_backend_steps_the_same_rules(tmp_path: Path):
     # the second rollout's steps 2, 3 of an episode then 1, 2 of the next: one end, at index 1
     assert torch.isfinite(trainer.buf_rew).all()
     np.testing.assert_array_equal(trainer.buf_done[:, 0].numpy(), [0, 1, 0, 0])
+
+
+def test_a_shared_policy_starts_every_ippo_agent(tmp_path: Path):
+    config = load_config("ippo", TINY)
+    scenario = build_scenario("paper", config)
+    shared = OnPolicyTrainer("ppo", scenario, load_config("ppo", TINY), 0, 1, tmp_path / "ppo")
+    with torch.no_grad():
+        shared.model.actor.linears()[-1].weight.normal_()  # actions far from zero
+    export_policy(tmp_path / "ppo", shared.model, scenario, {"algorithm": "ppo"})
+    ippo = OnPolicyTrainer("ippo", scenario, config, 0, 1, tmp_path / "ippo", init=tmp_path / "ppo")
+    obs = np.asarray(shared.episodes.observe())
+    expected = TorchActorPolicy(shared.model).act_batch(obs)
+    assert np.abs(expected).mean() > 0.05
+    np.testing.assert_allclose(TorchActorPolicy(ippo.model).act_batch(obs), expected, atol=1e-5)
+    with pytest.raises(ValueError, match="init_reg"):
+        OnPolicyTrainer(
+            "ppo", scenario, load_config("ppo", {**TINY, "init_reg": 1.0}), 0, 1, tmp_path
+        )
