@@ -185,7 +185,7 @@ class OnPolicyTrainer:
             self.model.state_norm.update(self._tensor(self.episodes.state()))
         self.anchor = [p.detach().clone() for p in self.model.actor.parameters()]
         self.optimizer = torch.optim.Adam(
-            self.model.parameters(), lr=config.learning_rate, eps=1e-5
+            self.model.parameters(), lr=config.learning_rate, eps=1e-5, fused=True
         )
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
         zeros = lambda *shape: torch.zeros(shape, device=self.device)  # noqa: E731
@@ -287,47 +287,46 @@ class OnPolicyTrainer:
         if cfg.value_norm:  # the critic's targets in units of the returns seen so far
             model.value_norm.update(returns.reshape(-1, 1))
         rows = (-1, N) if self.algo == "ippo" else (-1,)
-        b_obs = self.buf_obs.reshape(*rows, self.obs_dim)
-        b_act = self.buf_act.reshape(*rows, 3)
-        b_logp, b_adv = self.buf_logp.reshape(rows), advantages.reshape(rows)
-        b_ret, b_val = (
+        with torch.no_grad():  # the normalisers are frozen during an update: every row once
+            actor_in = model.obs_norm(self.buf_obs.reshape(*rows, self.obs_dim))
+            if self.buf_state is None:
+                critic_in = actor_in
+            else:  # row (t, b, n): the state of copy b at step t and agent n's one-hot
+                state = model.state_norm(self.buf_state.reshape(T * B, -1))
+                agent = torch.arange(N, device=self.device).repeat(T * B)
+                critic_in = model.state_rows(state.repeat_interleave(N, dim=0), agent)
+        columns = (
+            actor_in,
+            critic_in,
+            self.buf_act.reshape(*rows, 3),
+            self.buf_logp.reshape(rows),
+            advantages.reshape(rows),
             model.normalise(returns.reshape(rows)),
             model.normalise(self.buf_val.reshape(rows)),
         )
-        # the normalisers are frozen during an update: normalise every row once
-        with torch.no_grad():
-            b_norm = model.obs_norm(b_obs)
-            if self.buf_state is None:
-                b_critic = b_norm
-            else:
-                b_state = model.state_norm(self.buf_state.reshape(T * B, -1))
-        count = b_logp.shape[0]
+        count = actor_in.shape[0]
         size = max(1, count // cfg.minibatches)
         stats: dict[str, float] = {}
         for _ in range(cfg.epochs):
             order = torch.randperm(count, generator=self.generator, device=self.device)
+            shuffled = [column[order] for column in columns]  # one gather per epoch
             for start in range(0, count, size):
-                index = order[start : start + size]
-                log_prob, entropy = model.log_prob_entropy(b_norm[index], b_act[index])
-                if self.buf_state is None:
-                    rows_in = b_critic[index]
-                else:
-                    rows_in = model.state_rows(b_state[index // N], index % N)
+                obs, rows_in, act, old_logp, adv, ret, old_val = (
+                    column[start : start + size] for column in shuffled
+                )
+                log_prob, entropy = model.log_prob_entropy(obs, act)
                 value = model.critic(rows_in).squeeze(-1)
-                log_ratio = log_prob - b_logp[index]
+                log_ratio = log_prob - old_logp
                 ratio = log_ratio.exp()
-                adv = b_adv[index]
                 if cfg.norm_adv:
                     adv = (adv - adv.mean()) / (adv.std() + 1e-8)
                 pg_loss = torch.max(
                     -adv * ratio, -adv * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)
                 ).mean()
-                v_loss = (value - b_ret[index]) ** 2
+                v_loss = (value - ret) ** 2
                 if cfg.clip_vloss:
-                    clipped = b_val[index] + (value - b_val[index]).clamp(
-                        -cfg.clip_coef, cfg.clip_coef
-                    )
-                    v_loss = torch.max(v_loss, (clipped - b_ret[index]) ** 2)
+                    clipped = old_val + (value - old_val).clamp(-cfg.clip_coef, cfg.clip_coef)
+                    v_loss = torch.max(v_loss, (clipped - ret) ** 2)
                 v_loss = 0.5 * v_loss.mean()
                 loss = pg_loss - cfg.ent_coef * entropy.mean() + cfg.vf_coef * v_loss
                 if cfg.init_reg > 0:
@@ -342,8 +341,8 @@ class OnPolicyTrainer:
                 torch.nn.utils.clip_grad_norm_(model.actor_parameters(), cfg.max_grad_norm)
                 torch.nn.utils.clip_grad_norm_(model.critic.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
-                with torch.no_grad():
-                    approx_kl = float(((ratio - 1) - log_ratio).mean())
+            with torch.no_grad():  # the epoch's last minibatch
+                approx_kl = float(((ratio - 1) - log_ratio).mean())
             stats = {"pg_loss": pg_loss.item(), "v_loss": v_loss.item(), "approx_kl": approx_kl}
             if cfg.target_kl is not None and approx_kl > cfg.target_kl:
                 break
