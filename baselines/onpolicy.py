@@ -13,10 +13,10 @@ On ``--device cpu`` the episode layer runs on numpy, on ``cuda`` on torch tensor
 The run directory holds ``policy.json`` + ``policy.npz`` (the learned-policy file format, written
 at each evaluation, at the end and on Ctrl-C), ``checkpoint.pt`` (state dicts, for ``--init``),
 ``config.yaml`` (every hyper-parameter, the scenario and the run's metadata), ``scenario.yaml``
-and ``progress.csv`` (one row per update: frames, training wall time without the evaluations,
-agent-steps/s, mean reward per agent-step of the rollout, mean return and length of the last
-200 finished episodes; the evaluation columns filled at evaluations: completed missions, route
-error max, collisions after t = 0 and the realised J per UAV on the held-out seeds).
+and ``progress.csv`` (one row per update: frames, training wall and CPU time without the
+evaluations, agent-steps/s, mean reward per agent-step of the rollout, mean return and length of
+the last 200 finished episodes; the evaluation columns filled at evaluations: completed missions,
+route error max, collisions after t = 0 and the realised J per UAV on the held-out seeds).
 
 Modules: :mod:`.onpolicy_trainer` (rollout, GAE, update, evaluation, saves),
 :mod:`.onpolicy_nets` (networks), :mod:`.onpolicy_io` (policy files), :mod:`.onpolicy_config`
@@ -118,10 +118,11 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         signal.signal(signal.SIGTERM, previous)
     fps = result["frames"] / max(result["wall_time_s"], 1e-9)
+    per_cpu = result["frames"] / max(result["cpu_time_s"], 1e-9)
     print(
         f"{args.algo}: {result['frames']} frames in {result['wall_time_s']:.0f} s "
-        f"({fps:.0f} agent-steps/s); eval {result.get('eval_completed', '-')}/"
-        f"{result.get('eval_episodes', '-')} completed, "
+        f"({fps:.0f} agent-steps/s; {per_cpu:.0f} per CPU-second); "
+        f"eval {result.get('eval_completed', '-')}/{result.get('eval_episodes', '-')} completed, "
         f"J {result.get('eval_J', float('nan')):.4g}; wrote {args.out}"
     )
     return 0

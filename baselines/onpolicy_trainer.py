@@ -36,7 +36,8 @@ from uav_formation_env.scenes import n_uav_range
 
 TRAIN_SEED_BASE = 1_000_000  # training copies' first seeds: seed * BASE + BASE + b
 PROGRESS_COLUMNS = (
-    "update", "frames", "wall_s", "fps", "mean_reward", "mean_return", "mean_length", "episodes",
+    "update", "frames", "wall_s", "cpu_s", "fps", "mean_reward", "mean_return", "mean_length",
+    "episodes",
     "eval_completed", "eval_episodes", "eval_route_error_max_m", "eval_collisions", "eval_J",
 )  # fmt: skip
 
@@ -197,7 +198,9 @@ class OnPolicyTrainer:
         self.updates = max(1, math.ceil(int(frames) / self.frames_per_update))
         self.frames = 0
         self.update_index = 0
-        self.wall = 0.0
+        self.wall = 0.0  # training wall time [s], evaluations excluded
+        self.cpu = 0.0  # this process's CPU time of the training [s] (a shared machine's wall
+        # time grows with the other processes' load; the CPU time does not)
         self.episode_return = zeros(B, N)
         self.episode_length = torch.zeros(B, dtype=torch.long, device=self.device)
         # the last 200 finished episodes: mean-over-agents returns and lengths (steps)
@@ -380,6 +383,7 @@ class OnPolicyTrainer:
             "init": self.init,
             "frames": int(self.frames),
             "wall_time_s": round(self.wall, 2),
+            "cpu_time_s": round(self.cpu, 2),
             "scenario": self.scenario.name,
             "training_reward": self.scenario.episode.reward,
             "action_mode": getattr(self.scenario.episode, "action_mode", "acceleration"),
@@ -430,15 +434,18 @@ class OnPolicyTrainer:
         writer = csv.DictWriter(csv_file, fieldnames=PROGRESS_COLUMNS)
         writer.writeheader()
         start = time.perf_counter() - self.wall
+        cpu_start = time.process_time() - self.cpu
         try:
             while self.update_index < self.updates:
                 self.rollout()
                 self.update()
                 self.wall = time.perf_counter() - start
+                self.cpu = time.process_time() - cpu_start
                 row: dict[str, Any] = {
                     "update": self.update_index,
                     "frames": self.frames,
                     "wall_s": round(self.wall, 2),
+                    "cpu_s": round(self.cpu, 2),
                     "fps": round(self.frames / self.wall, 1),
                     "mean_reward": round(float(self.reward_sum) / self.frames_per_update, 5),
                     "mean_return": round(float(np.mean(self.finished)), 4) if self.finished else "",
@@ -450,6 +457,7 @@ class OnPolicyTrainer:
                     row.update(self.evaluate())
                     self.save()
                     start = time.perf_counter() - self.wall  # evaluation time is not training
+                    cpu_start = time.process_time() - self.cpu
                 writer.writerow(row)
                 csv_file.flush()
                 bar.update(self.frames_per_update)
