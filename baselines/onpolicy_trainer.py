@@ -263,7 +263,6 @@ class OnPolicyTrainer:
             self.step = step
             obs, state = self._tensor(step.observation), self._state()
         self.next_value = model.values_of_copies(obs, state)
-        self.frames += self.frames_per_update
 
     def _scaled(self, reward: torch.Tensor, done: torch.Tensor) -> torch.Tensor:
         """The reward the learner sees: as given, or divided by the running std of the
@@ -354,6 +353,7 @@ class OnPolicyTrainer:
         if self.buf_state is not None:
             self.model.state_norm.update(self.buf_state)
         self.update_index += 1
+        self.frames += self.frames_per_update  # the frames the saved policy has learnt from
         return stats
 
     # ------------------------------------------------------------------ evaluation and saving

@@ -212,3 +212,22 @@ def test_a_shared_policy_starts_every_ippo_agent(tmp_path: Path):
         OnPolicyTrainer(
             "ppo", scenario, load_config("ppo", {**TINY, "init_reg": 1.0}), 0, 1, tmp_path
         )
+
+
+def test_an_interrupted_run_saves_what_it_has(tmp_path: Path):
+    config = load_config("ppo", {**TINY, "eval_every": 0})
+    scenario = build_scenario("paper", config)
+    trainer = OnPolicyTrainer("ppo", scenario, config, 0, 10**6, tmp_path)
+    update = trainer.update
+
+    def interrupted():
+        if trainer.update_index == 2:
+            raise KeyboardInterrupt
+        return update()
+
+    trainer.update = interrupted
+    result = trainer.train(progress=False)
+    frames = 2 * config.rollout_steps * config.copies * scenario.n_uav  # the updates done
+    assert result["frames"] == frames and "eval_completed" not in result
+    assert json.loads((tmp_path / "policy.json").read_text())["frames"] == frames
+    assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["update"] == 2
