@@ -3,7 +3,7 @@ episode layer in-process: PPO with parameter sharing, MAPPO (centralised critic)
 
     python -m uav_formation_baselines.onpolicy --algo ppo --task paper --seed 0 --frames 2e6 \
         --copies 256 --out runs/ppo_paper [--device cpu|cuda] [--eval-every 10] [--eval-seeds 8] \
-        [--set key=value ...] [--init DIR]
+        [--set key=value ...] [--init DIR [--init-reg COEF]] [--resume]
 
 Frames are agent-steps: one control step of B copies of N UAVs is B N frames. The reward is
 ``step.reward`` of :class:`~uav_formation_env.episode.FormationEpisodes` as the scenario defines
@@ -58,7 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     parser.add_argument("--eval-every", type=integer_at_least(0), default=None, help="updates")
     parser.add_argument("--eval-seeds", type=integer_at_least(1), default=None)
-    parser.add_argument("--init", default=None, help="run directory to start from")
+    parser.add_argument(
+        "--init", default=None, help="run or policy directory to start from (fine-tuning)"
+    )
+    parser.add_argument(
+        "--resume", action="store_true",
+        help="continue the run in --out (its checkpoint.pt) up to --frames",
+    )  # fmt: skip
     parser.add_argument("--init-reg", type=float, default=None, help="L2 pull to the --init actor")
     parser.add_argument(
         "--set", dest="overrides", action="extend", nargs="+", default=[], metavar="KEY=VALUE",
@@ -108,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
             args.device,
             args.init,
             args.backend,
+            args.resume,
         )
     except ValueError as error:
         print(f"uav-formation: error: {error}", file=sys.stderr)

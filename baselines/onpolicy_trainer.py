@@ -113,6 +113,9 @@ class OnPolicyTrainer:
             its observation statistics, whose architecture replaces ``hidden``, ``activation``
             and ``obs_clip``), or None.
         backend: the episode layer's array library (None: numpy on the CPU, torch elsewhere).
+        resume: continue the run saved in ``out`` (its ``checkpoint.pt``: networks, optimiser,
+            frames, update, times) up to ``frames``, appending to its ``progress.csv``; the
+            episodes start afresh.
     """
 
     def __init__(
@@ -126,6 +129,7 @@ class OnPolicyTrainer:
         device: str = "cpu",
         init: str | Path | None = None,
         backend: str | None = None,
+        resume: bool = False,
     ) -> None:
         if algo not in ONPOLICY_ALGOS:
             raise ValueError(f"algo must be one of {ONPOLICY_ALGOS}, got {algo!r}")
@@ -135,6 +139,8 @@ class OnPolicyTrainer:
                 f"ippo needs a fixed number of UAVs (one network per UAV); scenario "
                 f"{scenario.name!r} draws N in {low}..{high}: use ppo or mappo"
             )
+        if resume and init is not None:
+            raise ValueError("resume continues the run in out; it takes no --init")
         if config.init_reg > 0 and init is None:
             raise ValueError("init_reg pulls the actor towards its --init weights: give --init")
         self.init = "" if init is None else str(init)
@@ -178,11 +184,11 @@ class OnPolicyTrainer:
         ).to(self.device)
         if policy_file is not None:
             load_actor(self.model, *policy_file)
-        elif init is not None:
-            self._load_init(Path(init))
+        elif init is not None or resume:
+            saved = self._load_init(Path(out) if resume else Path(init))
         else:  # first statistics from the reset observations
             self.model.obs_norm.update(self._tensor(self.step.observation))
-        if algo == "mappo" and (init is None or policy_file is not None):  # a fresh critic
+        if algo == "mappo" and (init is None and not resume or policy_file is not None):
             self.model.state_norm.update(self._tensor(self.episodes.state()))
         self.anchor = [p.detach().clone() for p in self.model.actor.parameters()]
         self.optimizer = torch.optim.Adam(
@@ -212,6 +218,11 @@ class OnPolicyTrainer:
         )
         self.discounted = zeros(B, N)
         self.last_eval: dict[str, Any] = {}
+        if resume:
+            self.optimizer.load_state_dict(saved["optimizer"])
+            self.frames, self.update_index = int(saved["frames"]), int(saved["update"])
+            self.wall, self.cpu = float(saved["wall_time_s"]), float(saved["cpu_time_s"])
+            self.init = str(saved["init"])
 
     # ------------------------------------------------------------------ helpers
     def _tensor(self, array: Any, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -399,6 +410,9 @@ class OnPolicyTrainer:
             "optimizer": self.optimizer.state_dict(),
             "frames": int(self.frames),
             "update": int(self.update_index),
+            "wall_time_s": float(self.wall),
+            "cpu_time_s": float(self.cpu),
+            "init": self.init,
         }
         atomic_write(self.out / "checkpoint.pt", lambda path: torch.save(checkpoint, path))
         config = {**meta, "hyperparams": self.config.as_dict()}
@@ -407,12 +421,12 @@ class OnPolicyTrainer:
             lambda path: path.write_text(yaml.safe_dump(config, sort_keys=False)),
         )
 
-    def _load_init(self, directory: Path) -> None:
-        """Start from a run directory's ``checkpoint.pt`` (model state: actor, critic and
-        normalisers; the optimiser starts fresh)."""
+    def _load_init(self, directory: Path) -> dict[str, Any]:
+        """Load a run directory's ``checkpoint.pt`` into the model (actor, critic and
+        normalisers); returns the checkpoint (optimiser state, counters) for a resume."""
         path = directory / "checkpoint.pt"
         if not path.is_file():
-            raise ValueError(f"--init: no checkpoint.pt in {str(directory)!r}")
+            raise ValueError(f"--init / --resume: no checkpoint.pt in {str(directory)!r}")
         state = torch.load(path, map_location=self.device, weights_only=True)
         try:
             self.model.load_state_dict(state["model"])
@@ -421,6 +435,7 @@ class OnPolicyTrainer:
             raise ValueError(
                 f"--init: {path} does not fit {self.algo} here: {first.strip()}"
             ) from None
+        return state
 
     # ------------------------------------------------------------------ loop
     def train(self, progress: bool = True) -> dict[str, Any]:
@@ -429,10 +444,15 @@ class OnPolicyTrainer:
         from tqdm.auto import tqdm
 
         save_scenario(self.scenario, self.out / "scenario.yaml")
-        bar = tqdm(total=self.updates * self.frames_per_update, unit="frame", disable=not progress)
-        csv_file = open(self.out / "progress.csv", "w", newline="", encoding="utf-8")  # noqa: SIM115
+        total = self.updates * self.frames_per_update
+        bar = tqdm(total=total, initial=self.frames, unit="frame", disable=not progress)
+        resumed = self.update_index > 0
+        csv_file = open(  # noqa: SIM115
+            self.out / "progress.csv", "a" if resumed else "w", newline="", encoding="utf-8"
+        )
         writer = csv.DictWriter(csv_file, fieldnames=PROGRESS_COLUMNS)
-        writer.writeheader()
+        if not resumed:
+            writer.writeheader()
         start = time.perf_counter() - self.wall
         cpu_start = time.process_time() - self.cpu
         try:

@@ -231,3 +231,24 @@ def test_an_interrupted_run_saves_what_it_has(tmp_path: Path):
     assert result["frames"] == frames and "eval_completed" not in result
     assert json.loads((tmp_path / "policy.json").read_text())["frames"] == frames
     assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["update"] == 2
+
+
+def test_resume_continues_the_run(tmp_path: Path):
+    config = load_config("mappo", {**TINY, "eval_every": 0})
+    scenario = build_scenario("paper", config)
+    per_update = config.rollout_steps * config.copies * scenario.n_uav
+    OnPolicyTrainer("mappo", scenario, config, 0, 2 * per_update, tmp_path).train(progress=False)
+    saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    again = OnPolicyTrainer("mappo", scenario, config, 0, 4 * per_update, tmp_path, resume=True)
+    assert again.update_index == 2 and again.frames == 2 * per_update
+    for key, value in saved["model"].items():
+        torch.testing.assert_close(again.model.state_dict()[key], value)
+    assert (
+        again.optimizer.state_dict()["state"][0]["step"] == saved["optimizer"]["state"][0]["step"]
+    )
+    again.train(progress=False)
+    with open(tmp_path / "progress.csv", encoding="utf-8") as stream:
+        rows = list(csv.DictReader(stream))
+    assert [int(r["update"]) for r in rows] == [1, 2, 3, 4]
+    assert float(rows[3]["wall_s"]) >= float(rows[1]["wall_s"])
+    assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["frames"] == 4 * per_update
