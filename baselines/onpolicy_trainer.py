@@ -259,11 +259,14 @@ class OnPolicyTrainer:
             self.episode_length += 1
             self.reward_sum += reward.sum()
             learn = self._scaled(reward, done)
-            if bool(step.truncated.any()):
+            # the copies whose return goes on past their end: truncated, and (unless
+            # bootstrap_diverged is off) also those ended by the divergence bounds
+            ended = step.truncated if cfg.bootstrap_diverged else step.truncated & ~step.diverged
+            if bool(ended.any()):
                 final_value = model.values_of_copies(
                     self._tensor(step.final_observation), self._state(step.result)
                 )
-                truncated = self._tensor(step.truncated, torch.bool)
+                truncated = self._tensor(ended, torch.bool)
                 learn = bootstrap_truncated(learn, final_value, truncated, cfg.gamma)
             self.buf_rew[t], self.buf_done[t] = learn, done.float()
             if bool(done.any()):

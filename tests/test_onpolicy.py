@@ -252,3 +252,28 @@ def test_resume_continues_the_run(tmp_path: Path):
     assert [int(r["update"]) for r in rows] == [1, 2, 3, 4]
     assert float(rows[3]["wall_s"]) >= float(rows[1]["wall_s"])
     assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["frames"] == 4 * per_update
+
+
+@pytest.mark.parametrize("bootstrap_diverged", [True, False])
+def test_diverged_copies_bootstrap_only_if_asked(tmp_path: Path, bootstrap_diverged: bool):
+    # full thrust against a 0.5 m/s velocity bound: every copy diverges at every step
+    overrides = {"env": {"episode": {"max_velocity_error": 0.5}}}
+    overrides["bootstrap_diverged"] = bootstrap_diverged
+    config = load_config("ppo", {**TINY, **overrides})
+    trainer = OnPolicyTrainer("ppo", build_scenario("paper", config), config, 0, 1, tmp_path)
+    with torch.no_grad():
+        for network, value in ((trainer.model.actor, 10.0), (trainer.model.critic, 5.0)):
+            network.linears()[-1].weight.zero_()
+            network.linears()[-1].bias.fill_(value)
+    rewards, step = [], trainer.episodes.step
+
+    def recording(actions):
+        result = step(actions)
+        assert result.diverged.all() and result.truncated.all()
+        rewards.append(np.array(result.reward))
+        return result
+
+    trainer.episodes.step = recording
+    trainer.rollout()
+    bonus = config.gamma * 5.0 if bootstrap_diverged else 0.0
+    np.testing.assert_allclose(trainer.buf_rew.numpy(), np.stack(rewards) + bonus, rtol=1e-5)
