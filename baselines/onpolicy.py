@@ -3,7 +3,7 @@ episode layer in-process: PPO with parameter sharing, MAPPO (centralised critic)
 
     python -m uav_formation_baselines.onpolicy --algo ppo --task paper --seed 0 --frames 2e6 \
         --copies 256 --out runs/ppo_paper [--device cpu|cuda] [--eval-every 10] [--eval-seeds 8] \
-        [--set key=value ...] [--init DIR]
+        [--set key=value ...] [--init DIR [--init-reg COEF]] [--resume]
 
 Frames are agent-steps: one control step of B copies of N UAVs is B N frames. The reward is
 ``step.reward`` of :class:`~uav_formation_env.episode.FormationEpisodes` as the scenario defines
@@ -13,10 +13,10 @@ On ``--device cpu`` the episode layer runs on numpy, on ``cuda`` on torch tensor
 The run directory holds ``policy.json`` + ``policy.npz`` (the learned-policy file format, written
 at each evaluation, at the end and on Ctrl-C), ``checkpoint.pt`` (state dicts, for ``--init``),
 ``config.yaml`` (every hyper-parameter, the scenario and the run's metadata), ``scenario.yaml``
-and ``progress.csv`` (one row per update: frames, training wall time without the evaluations,
-agent-steps/s, mean reward per agent-step of the rollout, mean return and length of the last
-200 finished episodes; the evaluation columns filled at evaluations: completed missions, route
-error max, collisions after t = 0 and the realised J per UAV on the held-out seeds).
+and ``progress.csv`` (one row per update: frames, training wall and CPU time without the
+evaluations, agent-steps/s, mean reward per agent-step of the rollout, mean return and length of
+the last 200 finished episodes; the evaluation columns filled at evaluations: completed missions,
+route error max, collisions after t = 0 and the realised J per UAV on the held-out seeds).
 
 Modules: :mod:`.onpolicy_trainer` (rollout, GAE, update, evaluation, saves),
 :mod:`.onpolicy_nets` (networks), :mod:`.onpolicy_io` (policy files), :mod:`.onpolicy_config`
@@ -58,7 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     parser.add_argument("--eval-every", type=integer_at_least(0), default=None, help="updates")
     parser.add_argument("--eval-seeds", type=integer_at_least(1), default=None)
-    parser.add_argument("--init", default=None, help="run directory to start from")
+    parser.add_argument(
+        "--init", default=None, help="run or policy directory to start from (fine-tuning)"
+    )
+    parser.add_argument(
+        "--resume", action="store_true",
+        help="continue the run in --out (its checkpoint.pt) up to --frames",
+    )  # fmt: skip
     parser.add_argument("--init-reg", type=float, default=None, help="L2 pull to the --init actor")
     parser.add_argument(
         "--set", dest="overrides", action="extend", nargs="+", default=[], metavar="KEY=VALUE",
@@ -108,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
             args.device,
             args.init,
             args.backend,
+            args.resume,
         )
     except ValueError as error:
         print(f"uav-formation: error: {error}", file=sys.stderr)
@@ -118,10 +125,11 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         signal.signal(signal.SIGTERM, previous)
     fps = result["frames"] / max(result["wall_time_s"], 1e-9)
+    per_cpu = result["frames"] / max(result["cpu_time_s"], 1e-9)
     print(
         f"{args.algo}: {result['frames']} frames in {result['wall_time_s']:.0f} s "
-        f"({fps:.0f} agent-steps/s); eval {result.get('eval_completed', '-')}/"
-        f"{result.get('eval_episodes', '-')} completed, "
+        f"({fps:.0f} agent-steps/s; {per_cpu:.0f} per CPU-second); "
+        f"eval {result.get('eval_completed', '-')}/{result.get('eval_episodes', '-')} completed, "
         f"J {result.get('eval_J', float('nan')):.4g}; wrote {args.out}"
     )
     return 0

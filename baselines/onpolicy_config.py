@@ -45,6 +45,10 @@ class OnPolicyConfig:
     clip_coef: float = 0.2
     clip_vloss: bool = False
     value_norm: bool = True  # critic targets normalised by running return statistics
+    # bootstrap a copy truncated by the divergence bounds like one at the time limit (false: its
+    # return ends there, as if terminated: a diverged state the critic never trained on gives
+    # no extrapolated value)
+    bootstrap_diverged: bool = True
     ent_coef: float = 0.0
     vf_coef: float = 0.5
     max_grad_norm: float = 0.5
@@ -84,10 +88,10 @@ class OnPolicyConfig:
             raise ValueError(f"log_std_init must be a number, got {self.log_std_init!r}")
         if self.target_kl is not None and (not _real(self.target_kl) or self.target_kl <= 0):
             raise ValueError(f"target_kl must be a positive number or null, got {self.target_kl!r}")
-        flags = ("anneal_lr", "clip_vloss", "value_norm", "norm_adv", "reward_scaling")
+        flags = ("anneal_lr", "clip_vloss", "value_norm", "bootstrap_diverged", "norm_adv")
         if self.reward not in ("train", "paper"):
             raise ValueError(f"reward must be 'train' or 'paper', got {self.reward!r}")
-        for name in flags:
+        for name in (*flags, "reward_scaling"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         hidden = self.hidden

@@ -92,12 +92,15 @@ def policy_architecture(header: dict[str, Any], arrays: dict[str, np.ndarray]) -
 
 def load_actor(model: ActorCritic, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
     """Copy a policy file's actor and observation statistics into ``model`` (same architecture:
-    see :func:`policy_architecture`); ``ValueError`` if a shape differs."""
+    see :func:`policy_architecture`; a shared actor is copied to each agent of a per-agent one);
+    ``ValueError`` if a shape differs."""
     layers = model.actor.linears()
     with torch.no_grad():
         for index, layer in enumerate(layers):
             for name, target in (("w", layer.weight), ("b", layer.bias)):
                 value = torch.as_tensor(arrays[f"m0.{name}{index}"])
+                if value.ndim == target.ndim - 1 and value.shape == target.shape[1:]:
+                    value = value.expand_as(target)  # a shared actor starts every IPPO agent
                 if tuple(value.shape) != tuple(target.shape):
                     raise ValueError(
                         f"--init: m0.{name}{index} has shape {tuple(value.shape)}, this "

@@ -37,7 +37,8 @@ from uav_formation_env.tasks import training_scenario
 
 TRAIN_SEED_BASE = 1_000_000  # training copies' first seeds: seed * BASE + BASE + b
 PROGRESS_COLUMNS = (
-    "update", "frames", "wall_s", "fps", "mean_reward", "mean_return", "mean_length", "episodes",
+    "update", "frames", "wall_s", "cpu_s", "fps", "mean_reward", "mean_return", "mean_length",
+    "episodes",
     "eval_completed", "eval_episodes", "eval_route_error_max_m", "eval_collisions", "eval_J",
 )  # fmt: skip
 
@@ -114,6 +115,9 @@ class OnPolicyTrainer:
             its observation statistics, whose architecture replaces ``hidden``, ``activation``
             and ``obs_clip``), or None.
         backend: the episode layer's array library (None: numpy on the CPU, torch elsewhere).
+        resume: continue the run saved in ``out`` (its ``checkpoint.pt``: networks, optimiser,
+            frames, update, times) up to ``frames``, appending to its ``progress.csv``; the
+            episodes start afresh.
     """
 
     def __init__(
@@ -127,6 +131,7 @@ class OnPolicyTrainer:
         device: str = "cpu",
         init: str | Path | None = None,
         backend: str | None = None,
+        resume: bool = False,
     ) -> None:
         if algo not in ONPOLICY_ALGOS:
             raise ValueError(f"algo must be one of {ONPOLICY_ALGOS}, got {algo!r}")
@@ -136,6 +141,10 @@ class OnPolicyTrainer:
                 f"ippo needs a fixed number of UAVs (one network per UAV); scenario "
                 f"{scenario.name!r} draws N in {low}..{high}: use ppo or mappo"
             )
+        if resume and init is not None:
+            raise ValueError("resume continues the run in out; it takes no --init")
+        if config.init_reg > 0 and init is None:
+            raise ValueError("init_reg pulls the actor towards its --init weights: give --init")
         self.init = "" if init is None else str(init)
         policy_file = None
         if init is not None and not (Path(init) / "checkpoint.pt").is_file():
@@ -177,15 +186,15 @@ class OnPolicyTrainer:
         ).to(self.device)
         if policy_file is not None:
             load_actor(self.model, *policy_file)
-        elif init is not None:
-            self._load_init(Path(init))
+        elif init is not None or resume:
+            saved = self._load_init(Path(out) if resume else Path(init))
         else:  # first statistics from the reset observations
             self.model.obs_norm.update(self._tensor(self.step.observation))
-        if algo == "mappo" and (init is None or policy_file is not None):  # a fresh critic
+        if algo == "mappo" and (init is None and not resume or policy_file is not None):
             self.model.state_norm.update(self._tensor(self.episodes.state()))
         self.anchor = [p.detach().clone() for p in self.model.actor.parameters()]
         self.optimizer = torch.optim.Adam(
-            self.model.parameters(), lr=config.learning_rate, eps=1e-5
+            self.model.parameters(), lr=config.learning_rate, eps=1e-5, fused=True
         )
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
         zeros = lambda *shape: torch.zeros(shape, device=self.device)  # noqa: E731
@@ -197,7 +206,9 @@ class OnPolicyTrainer:
         self.updates = max(1, math.ceil(int(frames) / self.frames_per_update))
         self.frames = 0
         self.update_index = 0
-        self.wall = 0.0
+        self.wall = 0.0  # training wall time [s], evaluations excluded
+        self.cpu = 0.0  # this process's CPU time of the training [s] (a shared machine's wall
+        # time grows with the other processes' load; the CPU time does not)
         self.episode_return = zeros(B, N)
         self.episode_length = torch.zeros(B, dtype=torch.long, device=self.device)
         # the last 200 finished episodes: mean-over-agents returns and lengths (steps)
@@ -209,6 +220,11 @@ class OnPolicyTrainer:
         )
         self.discounted = zeros(B, N)
         self.last_eval: dict[str, Any] = {}
+        if resume:
+            self.optimizer.load_state_dict(saved["optimizer"])
+            self.frames, self.update_index = int(saved["frames"]), int(saved["update"])
+            self.wall, self.cpu = float(saved["wall_time_s"]), float(saved["cpu_time_s"])
+            self.init = str(saved["init"])
 
     # ------------------------------------------------------------------ helpers
     def _tensor(self, array: Any, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -245,11 +261,14 @@ class OnPolicyTrainer:
             self.episode_length += 1
             self.reward_sum += reward.sum()
             learn = self._scaled(reward, done)
-            if bool(step.truncated.any()):
+            # the copies whose return goes on past their end: truncated, and (unless
+            # bootstrap_diverged is off) also those ended by the divergence bounds
+            ended = step.truncated if cfg.bootstrap_diverged else step.truncated & ~step.diverged
+            if bool(ended.any()):
                 final_value = model.values_of_copies(
                     self._tensor(step.final_observation), self._state(step.result)
                 )
-                truncated = self._tensor(step.truncated, torch.bool)
+                truncated = self._tensor(ended, torch.bool)
                 learn = bootstrap_truncated(learn, final_value, truncated, cfg.gamma)
             self.buf_rew[t], self.buf_done[t] = learn, done.float()
             if bool(done.any()):
@@ -260,7 +279,6 @@ class OnPolicyTrainer:
             self.step = step
             obs, state = self._tensor(step.observation), self._state()
         self.next_value = model.values_of_copies(obs, state)
-        self.frames += self.frames_per_update
 
     def _scaled(self, reward: torch.Tensor, done: torch.Tensor) -> torch.Tensor:
         """The reward the learner sees: as given, or divided by the running std of the
@@ -287,47 +305,46 @@ class OnPolicyTrainer:
         if cfg.value_norm:  # the critic's targets in units of the returns seen so far
             model.value_norm.update(returns.reshape(-1, 1))
         rows = (-1, N) if self.algo == "ippo" else (-1,)
-        b_obs = self.buf_obs.reshape(*rows, self.obs_dim)
-        b_act = self.buf_act.reshape(*rows, 3)
-        b_logp, b_adv = self.buf_logp.reshape(rows), advantages.reshape(rows)
-        b_ret, b_val = (
+        with torch.no_grad():  # the normalisers are frozen during an update: every row once
+            actor_in = model.obs_norm(self.buf_obs.reshape(*rows, self.obs_dim))
+            if self.buf_state is None:
+                critic_in = actor_in
+            else:  # row (t, b, n): the state of copy b at step t and agent n's one-hot
+                state = model.state_norm(self.buf_state.reshape(T * B, -1))
+                agent = torch.arange(N, device=self.device).repeat(T * B)
+                critic_in = model.state_rows(state.repeat_interleave(N, dim=0), agent)
+        columns = (
+            actor_in,
+            critic_in,
+            self.buf_act.reshape(*rows, 3),
+            self.buf_logp.reshape(rows),
+            advantages.reshape(rows),
             model.normalise(returns.reshape(rows)),
             model.normalise(self.buf_val.reshape(rows)),
         )
-        # the normalisers are frozen during an update: normalise every row once
-        with torch.no_grad():
-            b_norm = model.obs_norm(b_obs)
-            if self.buf_state is None:
-                b_critic = b_norm
-            else:
-                b_state = model.state_norm(self.buf_state.reshape(T * B, -1))
-        count = b_logp.shape[0]
+        count = actor_in.shape[0]
         size = max(1, count // cfg.minibatches)
         stats: dict[str, float] = {}
         for _ in range(cfg.epochs):
             order = torch.randperm(count, generator=self.generator, device=self.device)
+            shuffled = [column[order] for column in columns]  # one gather per epoch
             for start in range(0, count, size):
-                index = order[start : start + size]
-                log_prob, entropy = model.log_prob_entropy(b_norm[index], b_act[index])
-                if self.buf_state is None:
-                    rows_in = b_critic[index]
-                else:
-                    rows_in = model.state_rows(b_state[index // N], index % N)
+                obs, rows_in, act, old_logp, adv, ret, old_val = (
+                    column[start : start + size] for column in shuffled
+                )
+                log_prob, entropy = model.log_prob_entropy(obs, act)
                 value = model.critic(rows_in).squeeze(-1)
-                log_ratio = log_prob - b_logp[index]
+                log_ratio = log_prob - old_logp
                 ratio = log_ratio.exp()
-                adv = b_adv[index]
                 if cfg.norm_adv:
                     adv = (adv - adv.mean()) / (adv.std() + 1e-8)
                 pg_loss = torch.max(
                     -adv * ratio, -adv * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)
                 ).mean()
-                v_loss = (value - b_ret[index]) ** 2
+                v_loss = (value - ret) ** 2
                 if cfg.clip_vloss:
-                    clipped = b_val[index] + (value - b_val[index]).clamp(
-                        -cfg.clip_coef, cfg.clip_coef
-                    )
-                    v_loss = torch.max(v_loss, (clipped - b_ret[index]) ** 2)
+                    clipped = old_val + (value - old_val).clamp(-cfg.clip_coef, cfg.clip_coef)
+                    v_loss = torch.max(v_loss, (clipped - ret) ** 2)
                 v_loss = 0.5 * v_loss.mean()
                 loss = pg_loss - cfg.ent_coef * entropy.mean() + cfg.vf_coef * v_loss
                 if cfg.init_reg > 0:
@@ -342,8 +359,8 @@ class OnPolicyTrainer:
                 torch.nn.utils.clip_grad_norm_(model.actor_parameters(), cfg.max_grad_norm)
                 torch.nn.utils.clip_grad_norm_(model.critic.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
-                with torch.no_grad():
-                    approx_kl = float(((ratio - 1) - log_ratio).mean())
+            with torch.no_grad():  # the epoch's last minibatch
+                approx_kl = float(((ratio - 1) - log_ratio).mean())
             stats = {"pg_loss": pg_loss.item(), "v_loss": v_loss.item(), "approx_kl": approx_kl}
             if cfg.target_kl is not None and approx_kl > cfg.target_kl:
                 break
@@ -352,6 +369,7 @@ class OnPolicyTrainer:
         if self.buf_state is not None:
             self.model.state_norm.update(self.buf_state)
         self.update_index += 1
+        self.frames += self.frames_per_update  # the frames the saved policy has learnt from
         return stats
 
     # ------------------------------------------------------------------ evaluation and saving
@@ -381,6 +399,7 @@ class OnPolicyTrainer:
             "init": self.init,
             "frames": int(self.frames),
             "wall_time_s": round(self.wall, 2),
+            "cpu_time_s": round(self.cpu, 2),
             "scenario": self.scenario.name,
             "training_reward": self.scenario.episode.reward,
             "action_mode": self.scenario.episode.action,
@@ -400,6 +419,9 @@ class OnPolicyTrainer:
             "optimizer": self.optimizer.state_dict(),
             "frames": int(self.frames),
             "update": int(self.update_index),
+            "wall_time_s": float(self.wall),
+            "cpu_time_s": float(self.cpu),
+            "init": self.init,
         }
         atomic_write(self.out / "checkpoint.pt", lambda path: torch.save(checkpoint, path))
         config = {**meta, "hyperparams": self.config.as_dict()}
@@ -408,12 +430,12 @@ class OnPolicyTrainer:
             lambda path: path.write_text(yaml.safe_dump(config, sort_keys=False)),
         )
 
-    def _load_init(self, directory: Path) -> None:
-        """Start from a run directory's ``checkpoint.pt`` (model state: actor, critic and
-        normalisers; the optimiser starts fresh)."""
+    def _load_init(self, directory: Path) -> dict[str, Any]:
+        """Load a run directory's ``checkpoint.pt`` into the model (actor, critic and
+        normalisers); returns the checkpoint (optimiser state, counters) for a resume."""
         path = directory / "checkpoint.pt"
         if not path.is_file():
-            raise ValueError(f"--init: no checkpoint.pt in {str(directory)!r}")
+            raise ValueError(f"--init / --resume: no checkpoint.pt in {str(directory)!r}")
         state = torch.load(path, map_location=self.device, weights_only=True)
         try:
             self.model.load_state_dict(state["model"])
@@ -422,6 +444,7 @@ class OnPolicyTrainer:
             raise ValueError(
                 f"--init: {path} does not fit {self.algo} here: {first.strip()}"
             ) from None
+        return state
 
     # ------------------------------------------------------------------ loop
     def train(self, progress: bool = True) -> dict[str, Any]:
@@ -430,20 +453,28 @@ class OnPolicyTrainer:
         from tqdm.auto import tqdm
 
         save_scenario(self.scenario, self.out / "scenario.yaml")
-        bar = tqdm(total=self.updates * self.frames_per_update, unit="frame", disable=not progress)
-        csv_file = open(self.out / "progress.csv", "w", newline="", encoding="utf-8")  # noqa: SIM115
+        total = self.updates * self.frames_per_update
+        bar = tqdm(total=total, initial=self.frames, unit="frame", disable=not progress)
+        resumed = self.update_index > 0
+        csv_file = open(  # noqa: SIM115
+            self.out / "progress.csv", "a" if resumed else "w", newline="", encoding="utf-8"
+        )
         writer = csv.DictWriter(csv_file, fieldnames=PROGRESS_COLUMNS)
-        writer.writeheader()
+        if not resumed:
+            writer.writeheader()
         start = time.perf_counter() - self.wall
+        cpu_start = time.process_time() - self.cpu
         try:
             while self.update_index < self.updates:
                 self.rollout()
                 self.update()
                 self.wall = time.perf_counter() - start
+                self.cpu = time.process_time() - cpu_start
                 row: dict[str, Any] = {
                     "update": self.update_index,
                     "frames": self.frames,
                     "wall_s": round(self.wall, 2),
+                    "cpu_s": round(self.cpu, 2),
                     "fps": round(self.frames / self.wall, 1),
                     "mean_reward": round(float(self.reward_sum) / self.frames_per_update, 5),
                     "mean_return": round(float(np.mean(self.finished)), 4) if self.finished else "",
@@ -455,6 +486,7 @@ class OnPolicyTrainer:
                     row.update(self.evaluate())
                     self.save()
                     start = time.perf_counter() - self.wall  # evaluation time is not training
+                    cpu_start = time.process_time() - self.cpu
                 writer.writerow(row)
                 csv_file.flush()
                 bar.update(self.frames_per_update)

@@ -194,3 +194,86 @@ def test_torch_backend_steps_the_same_rules(tmp_path: Path):
     # the second rollout's steps 2, 3 of an episode then 1, 2 of the next: one end, at index 1
     assert torch.isfinite(trainer.buf_rew).all()
     np.testing.assert_array_equal(trainer.buf_done[:, 0].numpy(), [0, 1, 0, 0])
+
+
+def test_a_shared_policy_starts_every_ippo_agent(tmp_path: Path):
+    config = load_config("ippo", TINY)
+    scenario = build_scenario("paper", config)
+    shared = OnPolicyTrainer("ppo", scenario, load_config("ppo", TINY), 0, 1, tmp_path / "ppo")
+    with torch.no_grad():
+        shared.model.actor.linears()[-1].weight.normal_()  # actions far from zero
+    export_policy(tmp_path / "ppo", shared.model, scenario, {"algorithm": "ppo"})
+    ippo = OnPolicyTrainer("ippo", scenario, config, 0, 1, tmp_path / "ippo", init=tmp_path / "ppo")
+    obs = np.asarray(shared.episodes.observe())
+    expected = TorchActorPolicy(shared.model).act_batch(obs)
+    assert np.abs(expected).mean() > 0.05
+    np.testing.assert_allclose(TorchActorPolicy(ippo.model).act_batch(obs), expected, atol=1e-5)
+    with pytest.raises(ValueError, match="init_reg"):
+        OnPolicyTrainer(
+            "ppo", scenario, load_config("ppo", {**TINY, "init_reg": 1.0}), 0, 1, tmp_path
+        )
+
+
+def test_an_interrupted_run_saves_what_it_has(tmp_path: Path):
+    config = load_config("ppo", {**TINY, "eval_every": 0})
+    scenario = build_scenario("paper", config)
+    trainer = OnPolicyTrainer("ppo", scenario, config, 0, 10**6, tmp_path)
+    update = trainer.update
+
+    def interrupted():
+        if trainer.update_index == 2:
+            raise KeyboardInterrupt
+        return update()
+
+    trainer.update = interrupted
+    result = trainer.train(progress=False)
+    frames = 2 * config.rollout_steps * config.copies * scenario.n_uav  # the updates done
+    assert result["frames"] == frames and "eval_completed" not in result
+    assert json.loads((tmp_path / "policy.json").read_text())["frames"] == frames
+    assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["update"] == 2
+
+
+def test_resume_continues_the_run(tmp_path: Path):
+    config = load_config("mappo", {**TINY, "eval_every": 0})
+    scenario = build_scenario("paper", config)
+    per_update = config.rollout_steps * config.copies * scenario.n_uav
+    OnPolicyTrainer("mappo", scenario, config, 0, 2 * per_update, tmp_path).train(progress=False)
+    saved = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    again = OnPolicyTrainer("mappo", scenario, config, 0, 4 * per_update, tmp_path, resume=True)
+    assert again.update_index == 2 and again.frames == 2 * per_update
+    for key, value in saved["model"].items():
+        torch.testing.assert_close(again.model.state_dict()[key], value)
+    assert (
+        again.optimizer.state_dict()["state"][0]["step"] == saved["optimizer"]["state"][0]["step"]
+    )
+    again.train(progress=False)
+    with open(tmp_path / "progress.csv", encoding="utf-8") as stream:
+        rows = list(csv.DictReader(stream))
+    assert [int(r["update"]) for r in rows] == [1, 2, 3, 4]
+    assert float(rows[3]["wall_s"]) >= float(rows[1]["wall_s"])
+    assert torch.load(tmp_path / "checkpoint.pt", weights_only=True)["frames"] == 4 * per_update
+
+
+@pytest.mark.parametrize("bootstrap_diverged", [True, False])
+def test_diverged_copies_bootstrap_only_if_asked(tmp_path: Path, bootstrap_diverged: bool):
+    # full thrust against a 0.5 m/s velocity bound: every copy diverges at every step
+    overrides = {"env": {"episode": {"max_velocity_error": 0.5}}}
+    overrides["bootstrap_diverged"] = bootstrap_diverged
+    config = load_config("ppo", {**TINY, **overrides})
+    trainer = OnPolicyTrainer("ppo", build_scenario("paper", config), config, 0, 1, tmp_path)
+    with torch.no_grad():
+        for network, value in ((trainer.model.actor, 10.0), (trainer.model.critic, 5.0)):
+            network.linears()[-1].weight.zero_()
+            network.linears()[-1].bias.fill_(value)
+    rewards, step = [], trainer.episodes.step
+
+    def recording(actions):
+        result = step(actions)
+        assert result.diverged.all() and result.truncated.all()
+        rewards.append(np.array(result.reward))
+        return result
+
+    trainer.episodes.step = recording
+    trainer.rollout()
+    bonus = config.gamma * 5.0 if bootstrap_diverged else 0.0
+    np.testing.assert_allclose(trainer.buf_rew.numpy(), np.stack(rewards) + bonus, rtol=1e-5)
