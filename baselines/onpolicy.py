@@ -42,7 +42,13 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train PPO (shared), MAPPO or IPPO on the batched episode layer in-process.",
     )
     parser.add_argument("--algo", choices=ONPOLICY_ALGOS, required=True)
-    parser.add_argument("--task", default="paper", help="registered scenario name or YAML path")
+    parser.add_argument(
+        "--task",
+        default="paper",
+        help="registered scenario name or YAML path; a comma-separated list (hold,track,paper) "
+        "is a curriculum: the copies move to the next task after an evaluation that completes "
+        "promote_at of its missions",
+    )
     parser.add_argument("--seed", type=integer_at_least(0), default=0)
     parser.add_argument(
         "--frames", type=_frames, required=True, help="agent-steps (B N per control step), e.g. 2e6"
@@ -103,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
             overrides[key] = value
     try:
         config = load_config(args.algo, overrides, args.hyperparams)
-        scenario = build_scenario(args.task, config)
+        # "hold,track,paper": a curriculum up the task ladder (uav_formation_env.tasks.LADDER)
+        scenario, *ladder = [build_scenario(task, config) for task in args.task.split(",")]
         trainer = OnPolicyTrainer(
             args.algo,
             scenario,
@@ -115,6 +122,7 @@ def main(argv: list[str] | None = None) -> int:
             args.init,
             args.backend,
             args.resume,
+            ladder,
         )
     except ValueError as error:
         print(f"uav-formation: error: {error}", file=sys.stderr)

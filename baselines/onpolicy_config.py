@@ -65,6 +65,7 @@ class OnPolicyConfig:
     eval_seeds: int = 8  # held-out evaluation episodes
     eval_seed_start: int = 1000  # first evaluation seed (training copies draw from 10^6 on)
     reward: str = "train"  # "train": the task under tasks.TRAINING_PRESET; "paper": -J_i
+    promote_at: float = 0.75  # curriculum: completed fraction of an evaluation that moves up
     env: Mapping[str, Any] = field(default_factory=dict)  # scenario overrides (with_overrides)
 
     def __post_init__(self) -> None:
@@ -89,6 +90,8 @@ class OnPolicyConfig:
         if self.target_kl is not None and (not _real(self.target_kl) or self.target_kl <= 0):
             raise ValueError(f"target_kl must be a positive number or null, got {self.target_kl!r}")
         flags = ("anneal_lr", "clip_vloss", "value_norm", "bootstrap_diverged", "norm_adv")
+        if not _real(self.promote_at) or not 0.0 <= self.promote_at <= 1.0:
+            raise ValueError(f"promote_at must be a number in [0, 1], got {self.promote_at!r}")
         if self.reward not in ("train", "paper"):
             raise ValueError(f"reward must be 'train' or 'paper', got {self.reward!r}")
         for name in (*flags, "reward_scaling"):

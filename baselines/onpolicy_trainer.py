@@ -12,6 +12,7 @@ import math
 import sys
 import time
 from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,15 +31,18 @@ from uav_formation_baselines.onpolicy_io import (
 from uav_formation_baselines.onpolicy_nets import ActorCritic, RunningNorm, TorchActorPolicy
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
+from uav_formation_env.core.local_observation import observation_size
 from uav_formation_env.episode import FormationEpisodes, global_state
 from uav_formation_env.evaluation import run_episodes, summarise
+from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
 from uav_formation_env.scenes import n_uav_range
-from uav_formation_env.tasks import training_scenario
+from uav_formation_env.tasks import evaluation_scenario, training_scenario
 
 TRAIN_SEED_BASE = 1_000_000  # training copies' first seeds: seed * BASE + BASE + b
 PROGRESS_COLUMNS = (
     "update", "frames", "wall_s", "cpu_s", "fps", "mean_reward", "mean_return", "mean_length",
     "episodes",
+    "task", "eval_return",
     "eval_completed", "eval_episodes", "eval_route_error_max_m", "eval_collisions", "eval_J",
 )  # fmt: skip
 
@@ -92,12 +96,6 @@ def build_scenario(task: str | Path | Scenario, config: OnPolicyConfig) -> Scena
     return scenario
 
 
-def evaluation_scenario(scenario: Scenario) -> Scenario:
-    """The training scenario as the runner flies it: every episode from t = 0."""
-    if scenario.episode.start == "zero":
-        return scenario
-    return with_overrides(scenario, {"episode": {"start": "zero"}})
-
 
 class OnPolicyTrainer:
     """One run: episodes, actor-critic, rollout buffers, updates, evaluations and saves.
@@ -118,6 +116,9 @@ class OnPolicyTrainer:
         resume: continue the run saved in ``out`` (its ``checkpoint.pt``: networks, optimiser,
             frames, update, times) up to ``frames``, appending to its ``progress.csv``; the
             episodes start afresh.
+        ladder: the curriculum's next tasks (same observation size as ``scenario``): after an
+            evaluation that completes ``config.promote_at`` of its missions the copies move to
+            the next one (:meth:`promote`).
     """
 
     def __init__(
@@ -132,9 +133,14 @@ class OnPolicyTrainer:
         init: str | Path | None = None,
         backend: str | None = None,
         resume: bool = False,
+        ladder: Sequence[Scenario] | None = None,
     ) -> None:
         if algo not in ONPOLICY_ALGOS:
             raise ValueError(f"algo must be one of {ONPOLICY_ALGOS}, got {algo!r}")
+        sizes = {observation_size(task) for task in (scenario, *(ladder or ()))}
+        if len(sizes) > 1:
+            names = [task.name for task in (scenario, *(ladder or ()))]
+            raise ValueError(f"a curriculum needs one observation size; {names} give {sizes}")
         low, high = n_uav_range(scenario)
         if algo == "ippo" and low != high:
             raise ValueError(
@@ -161,14 +167,9 @@ class OnPolicyTrainer:
         if backend not in ("numpy", "torch") or (backend == "numpy" and self.device.type != "cpu"):
             raise ValueError(f"backend must be 'torch' on {self.device}, or 'numpy' on the CPU")
         self.backend = backend
-        self.episodes = FormationEpisodes(
-            scenario,
-            batch_size=config.copies,
-            autoreset=True,
-            backend=backend,
-            device=self.device if backend == "torch" else None,
-        )
-        self.step = self.episodes.reset(seed=TRAIN_SEED_BASE * (self.seed + 1))
+        self.ladder = [scenario, *(ladder or ())]  # the curriculum's tasks, the current first
+        self.curriculum = [task.name for task in self.ladder]
+        self.step = self._start_task(scenario)
         B, N = config.copies, self.episodes.n_uav
         T, D = config.rollout_steps, self.step.observation.shape[-1]
         S = int(self.episodes.state().shape[-1])
@@ -378,12 +379,18 @@ class OnPolicyTrainer:
         cfg = self.config
         seeds = list(range(cfg.eval_seed_start, cfg.eval_seed_start + cfg.eval_seeds))
         policy = TorchActorPolicy(self.model, self.device)
+        if self.scenario.episode.action == "velocity":
+            policy = VelocitySetpointPolicy(
+                policy, self.scenario.episode, self.scenario.dynamics.u_max
+            )
         batch = run_episodes(
             evaluation_scenario(self.scenario), policy, seeds, policy_name=self.algo
         )
         summary = summarise(batch)
         mission = summary["mission"]
         self.last_eval = {
+            "task": self.scenario.name,
+            "eval_return": float(summary["return_mean"]),
             "eval_completed": int(mission["completed"]),
             "eval_episodes": len(seeds),
             "eval_route_error_max_m": float(mission["route_error_max_m"]),
@@ -401,6 +408,7 @@ class OnPolicyTrainer:
             "wall_time_s": round(self.wall, 2),
             "cpu_time_s": round(self.cpu, 2),
             "scenario": self.scenario.name,
+            "curriculum": self.curriculum,
             "training_reward": self.scenario.episode.reward,
             "action_mode": self.scenario.episode.action,
             # what evaluation needs to fly the policy (policies.action_modes, the route slots)
@@ -446,6 +454,32 @@ class OnPolicyTrainer:
             ) from None
         return state
 
+    # ------------------------------------------------------------------ curriculum
+    def _start_task(self, scenario: Scenario) -> Any:
+        """Episodes of ``scenario`` for the copies (a new task of the curriculum), reset."""
+        self.scenario = scenario
+        self.episodes = FormationEpisodes(
+            scenario,
+            batch_size=self.config.copies,
+            autoreset=True,
+            backend=self.backend,
+            device=self.device if self.backend == "torch" else None,
+        )
+        task = self.curriculum.index(scenario.name)
+        return self.episodes.reset(seed=TRAIN_SEED_BASE * (self.seed + 1) + task * 10_000)
+
+    def promote(self) -> bool:
+        """Move to the next task of the curriculum if the last evaluation completed at least
+        ``promote_at`` of its missions; returns whether it moved."""
+        following = self.curriculum.index(self.scenario.name) + 1
+        if following >= len(self.ladder) or not self.last_eval:
+            return False
+        rate = self.last_eval["eval_completed"] / max(1, self.last_eval["eval_episodes"])
+        if rate < self.config.promote_at:
+            return False
+        self.step = self._start_task(self.ladder[following])
+        return True
+
     # ------------------------------------------------------------------ loop
     def train(self, progress: bool = True) -> dict[str, Any]:
         """Run every update (evaluating every ``eval_every``); saves at evaluations, at the end
@@ -485,6 +519,7 @@ class OnPolicyTrainer:
                 if (every and self.update_index % every == 0) or self.update_index == self.updates:
                     row.update(self.evaluate())
                     self.save()
+                    self.promote()
                     start = time.perf_counter() - self.wall  # evaluation time is not training
                     cpu_start = time.process_time() - self.cpu
                 writer.writerow(row)

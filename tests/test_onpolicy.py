@@ -23,7 +23,7 @@ from uav_formation_baselines.onpolicy_trainer import (
     build_scenario,
     gae,
 )
-from uav_formation_env.config_io import resolve_scenario
+from uav_formation_env.config_io import resolve_scenario, with_overrides
 
 TINY = {
     "copies": 4,
@@ -57,7 +57,8 @@ def test_gae_hand_computed_with_truncated_and_terminated_steps():
 def test_rollout_bootstraps_the_truncated_step(tmp_path: Path):
     # 3-step episodes, a critic that says 5 everywhere: the reward stored at the last step of
     # each episode is the env's reward + gamma * 5, every other one the env's reward
-    config = load_config("ppo", {**TINY, "env": {"duration": 0.6}})
+    env = {"duration": 0.6, "episode": {"start": "zero"}}  # every copy's episode at once
+    config = load_config("ppo", {**TINY, "env": env})
     trainer = OnPolicyTrainer("ppo", build_scenario("paper", config), config, 0, 1, tmp_path)
     last = trainer.model.critic.linears()[-1]
     with torch.no_grad():
@@ -277,3 +278,31 @@ def test_diverged_copies_bootstrap_only_if_asked(tmp_path: Path, bootstrap_diver
     trainer.rollout()
     bonus = config.gamma * 5.0 if bootstrap_diverged else 0.0
     np.testing.assert_allclose(trainer.buf_rew.numpy(), np.stack(rewards) + bonus, rtol=1e-5)
+
+
+def test_curriculum_moves_up_after_a_completed_evaluation(tmp_path: Path) -> None:
+    config = load_config(
+        "ppo",
+        {
+            "copies": 2,
+            "rollout_steps": 4,
+            "epochs": 1,
+            "minibatches": 1,
+            "eval_seeds": 1,
+            "promote_at": 0.0,
+        },
+    )
+    hold, track = (build_scenario(t, config) for t in ("hold", "track"))
+    short = [with_overrides(s, {"duration": 20.0}) for s in (hold, track)]
+    trainer = OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+    assert trainer.scenario.name == "hold" and not trainer.promote()  # no evaluation yet
+    trainer.evaluate()
+    assert trainer.promote() and trainer.scenario.name == "track"
+    assert trainer.episodes.scenario.name == "track" and trainer.metadata()["curriculum"] == [
+        "hold",
+        "track",
+    ]
+    trainer.evaluate()
+    assert not trainer.promote()  # the last task
+    with pytest.raises(ValueError, match="one observation size"):
+        OnPolicyTrainer("ppo", hold, config, 0, 1, tmp_path, ladder=[build_scenario("n3", config)])
