@@ -10,10 +10,10 @@ reset, and a TorchRL group has one shape, so it has no task here. The environmen
 the global state of ``state()`` for centralised critics (MAPPO, MADDPG, QMIX-like mixers), and the
 numeric infos (cost terms, neighbours, ...) under ``("uav", "info")``.
 
-The task's config (:class:`UavFormationTaskConfig`) turns on the episode layer's training devices
-by default: ``log1p`` reward with J_0 = 100, divergence truncation (100 m formation error,
-40 m/s velocity error) and a 200 m mission corridor. Without them the per-episode returns are
--2e11..-4e12 and the policy gradient is useless (see docs/integrations.md)::
+The task's config (:class:`UavFormationTaskConfig`) puts the scenario under the training preset
+by default (``reward="train"``: :data:`uav_formation_env.tasks.TRAINING_PRESET`, docs/training.md),
+the same task the project's own trainer sees; ``reward="paper"`` keeps -J_i, whose per-episode
+returns are -2e11..-4e12::
 
     from benchmarl.algorithms import MappoConfig
     from benchmarl.experiment import Experiment, ExperimentConfig
@@ -74,9 +74,8 @@ class UavFormationTaskConfig:
 
     Attributes:
         scenario: a registered scenario name (``"paper"``, ``"n3"``, ...) or a YAML path.
-        reward, reward_scale, max_formation_error, max_velocity_error, corridor_width: the
-            episode layer's training devices (``scenario.episode``); 0 turns a bound off and
-            ``reward="raw"`` gives the untransformed -J_i.
+        reward: ``"train"`` (the training preset of :mod:`uav_formation_env.tasks`) or
+            ``"paper"`` (the scenario's own reward, -J_i).
         duration: episode length [s]; None keeps the scenario's (200 s, 1000 steps, for the paper).
         overrides: any other scenario fields, as ``{"observer.enabled": False}``.
         return_state: expose the global state ``state()`` (for centralised critics).
@@ -85,11 +84,7 @@ class UavFormationTaskConfig:
     """
 
     scenario: str = "paper"
-    reward: str = "log1p"
-    reward_scale: float = 100.0
-    max_formation_error: float = 100.0
-    max_velocity_error: float = 40.0
-    corridor_width: float = 200.0
+    reward: str = "train"
     duration: float | None = None
     overrides: dict[str, Any] = field(default_factory=dict)
     return_state: bool = True
@@ -101,13 +96,7 @@ class UavFormationTaskConfig:
 
     def scenario_overrides(self) -> dict[str, Any]:
         """The env overrides of this config (as for ``parallel_env(scenario, **overrides)``)."""
-        overrides: dict[str, Any] = {
-            "episode.reward": self.reward,
-            "episode.reward_scale": self.reward_scale,
-            "episode.max_formation_error": self.max_formation_error,
-            "episode.max_velocity_error": self.max_velocity_error,
-            "episode.corridor_width": self.corridor_width,
-        }
+        overrides: dict[str, Any] = {"reward": self.reward}
         if self.duration is not None:
             overrides["duration"] = self.duration
         overrides.update(self.overrides)
@@ -274,6 +263,6 @@ def uav_formation_task(
     scenario: str = "paper", name: str | None = None, **config: Any
 ) -> UavFormationTaskClass:
     """A task for any scenario name or YAML path, with :class:`UavFormationTaskConfig` options,
-    e.g. ``uav_formation_task("my_scenario.yaml", duration=60.0, corridor_width=0.0)``."""
+    e.g. ``uav_formation_task("my_scenario.yaml", duration=60.0, reward="paper")``."""
     label = name or str(scenario).rsplit("/", 1)[-1].split(".")[0].upper()
     return UavFormationTaskClass(name=label, config={"scenario": str(scenario), **config})

@@ -190,6 +190,8 @@ def comparison_row(
     row["min_separation_after_start_m"] = mission["min_separation_after_start_m"]
     row["policy_ms_per_step"] = 1e3 * summary["policy_time_per_step_s"]
     row["failed_seeds"] = " ".join(sorted(mission["failures"], key=int))
+    row["return_mean"] = summary.get("return_mean")
+    row["reward"] = summary.get("reward")
     return row
 
 

@@ -43,7 +43,7 @@ from uav_formation_baselines.evaluate import (
     run_scenario,
 )
 from uav_formation_env.config_io import resolve_scenario, with_overrides
-from uav_formation_env.evaluation import mean_ci95, write_json
+from uav_formation_env.evaluation import mean_ci95, wilson_ci95, write_json
 
 __all__ = ["algorithm_rows", "run_record", "main"]
 
@@ -86,6 +86,8 @@ def _row(
     row["cost_ratio_to_reference"] = mean_cost / reference_cost if reference_cost else None
     row["completed"] = sum(r["completed"] for r in per_run)
     row["episodes"] = sum(r["episodes"] for r in per_run)
+    row["completed_ci95"] = wilson_ci95(row["completed"], row["episodes"])
+    row["returns_per_run"] = [r["return_mean"] for r in per_run]
     row["completed_per_run"] = [r["completed"] for r in per_run]
     row["collisions_after_start"] = sum(r["collisions_after_start"] for r in per_run)
     row["min_separation_after_start_m"] = min(r["min_separation_after_start_m"] for r in per_run)
@@ -114,7 +116,23 @@ def algorithm_rows(
         rows.append(_row(algorithm, per_run, [record for record, _ in pairs], ref_cost))
     for name, summary in references.items():
         rows.append(_row(name, [comparison_row(name, summary, ref_cost)], None, ref_cost))
+    scores(rows, references)
     return rows
+
+
+def scores(rows: list[dict[str, Any]], references: dict[str, dict[str, Any]]) -> None:
+    """Adds each row's normalised score, ``(R - R_random) / (R_lfpio - R_random)`` with R the
+    return per UAV under the training reward (mean and 95 % half-width over training runs),
+    where the references hold ``random`` and LFPIO flown under that reward; else None."""
+    low, high = references.get("random"), references.get(REFERENCE)
+    usable = low and high and low.get("reward") == high.get("reward") == "train"
+    for row in rows:
+        if not usable or low["return_mean"] == high["return_mean"]:
+            row["score"] = row["score_ci95"] = None
+            continue
+        span = high["return_mean"] - low["return_mean"]
+        values = (np.array(row["returns_per_run"]) - low["return_mean"]) / span
+        row["score"], row["score_ci95"] = mean_ci95(values)
 
 
 def _ratio(x: float) -> str:
@@ -129,12 +147,12 @@ def _pm(row: dict[str, Any], key: str, digits: int) -> str:
 def format_markdown(rows: list[dict[str, Any]]) -> str:
     """The table as markdown."""
     head = (
-        "| policy | training seeds | realised J per UAV | vs LFPIO | missions completed "
-        "(per run) | route error max [m] | route error RMS [m] | velocity RMSE [m/s] | obstacles "
-        "met | collisions after t = 0 | min separation [m] | wall time per run [s] | agent-steps "
-        "per run |"
+        "| policy | training seeds | realised J per UAV | vs LFPIO | score | missions completed "
+        "(per run) [95 % CI] | route error max [m] | route error RMS [m] | velocity RMSE [m/s] | "
+        "obstacles met | collisions after t = 0 | min separation [m] | wall time per run [s] | "
+        "agent-steps per run |"
     )
-    lines = [head, "|" + "---|" * 13]
+    lines = [head, "|" + "---|" * 14]
     for row in rows:
         cost = f"{row['realised_cost_mean']:.3g} ± {row['realised_cost_mean_ci95']:.2g}"
         ratio = row["cost_ratio_to_reference"]
@@ -142,10 +160,13 @@ def format_markdown(rows: list[dict[str, Any]]) -> str:
         met = ", ".join(f"{o} {k}" for o, k in row["obstacles_met"].items())
         wall = row["wall_time_s_per_run"]
         steps = row["agent_steps_per_run"]
+        low, high = row["completed_ci95"]
+        score = "-" if row.get("score") is None else f"{row['score']:.2f} ± {row['score_ci95']:.2f}"
         lines.append(
             f"| {row['policy']} | {row['training_seeds'] or '-'} | {cost} | "
-            f"{'-' if ratio is None else _ratio(ratio)} | {row['completed']}/{row['episodes']} "
-            f"({per_run}) | {_pm(row, 'route_error_max_m', 1)} | {_pm(row, 'route_error_rms_m', 1)}"
+            f"{'-' if ratio is None else _ratio(ratio)} | {score} | "
+            f"{row['completed']}/{row['episodes']} ({per_run}) [{100 * low:.0f}-{100 * high:.0f} %]"
+            f" | {_pm(row, 'route_error_max_m', 1)} | {_pm(row, 'route_error_rms_m', 1)}"
             f" | {_pm(row, 'velocity_rmse_mps', 2)} | {met} | {row['collisions_after_start']} | "
             f"{row['min_separation_after_start_m']:.2f} | "
             f"{'-' if wall is None else f'{wall:.0f}'} | "

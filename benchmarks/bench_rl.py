@@ -1,4 +1,9 @@
-"""PPO training throughput on our env and on mpe2's ``simple_spread_v3`` (prints, asserts nothing).
+"""RL training throughput, ours beside peers measured in the same run (prints, asserts nothing).
+
+The project's in-process trainer (``uav_formation_baselines.onpolicy``: PPO and MAPPO stepping the
+batched episode layer under the training preset) is timed first, beside BenchMARL's MAPPO on VMAS
+``navigation`` (5 agents, :mod:`bench_marl`'s settings) when vmas is importable; then SB3 PPO on
+our VecEnv and on mpe2:
 
 Both environments are SB3 VecEnvs with one entry per (copy, agent) and one shared policy:
 
@@ -14,7 +19,7 @@ together, on the bare VecEnvs. Rates are agent-timesteps/s (SB3's ``num_timestep
 counts) and their ratio ours / mpe2, which is robust to the machine's speed. For information, our
 full training stack (divergence reset, staggered start, monitor, VecNormalize) is timed too.
 
-    python benchmarks/bench_rl.py [--timesteps 51200] [--copies 8] [--threads 1]
+    python benchmarks/bench_rl.py [--timesteps 51200] [--copies 8] [--threads 1] [--updates 5]
 """
 
 from __future__ import annotations
@@ -144,6 +149,34 @@ def mpe2_venv(copies: int) -> VecEnv | None:
     return ParallelCopiesVecEnv(make, copies)
 
 
+def onpolicy_rate(algo: str, scenario: str, updates: int, threads: int) -> float:
+    """Agent-steps/s of ``updates`` updates of the project's trainer (rollouts, updates and no
+    evaluation) after one warm-up update, with ``baselines/hyperparams/onpolicy.yml``."""
+    import tempfile
+
+    from uav_formation_baselines.onpolicy_config import load_config
+    from uav_formation_baselines.onpolicy_trainer import OnPolicyTrainer, build_scenario
+
+    config = load_config(algo, {"eval_every": 0, "threads": threads})
+    with tempfile.TemporaryDirectory() as folder:
+        trainer = OnPolicyTrainer(algo, build_scenario(scenario, config), config, 0, 1, folder)
+        trainer.rollout()
+        trainer.update()
+        start = time.perf_counter()
+        for _ in range(updates):
+            trainer.rollout()
+            trainer.update()
+        return updates * trainer.frames_per_update / (time.perf_counter() - start)
+
+
+def vmas_mappo_rate(iterations: int) -> float | None:
+    """Agent-steps/s of BenchMARL MAPPO on VMAS navigation (5 agents), or None without vmas."""
+    from bench_marl import frames_per_second, vmas_navigation
+
+    task = vmas_navigation(5)
+    return None if task is None else 5 * frames_per_second("mappo", task, iterations)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument(
@@ -155,8 +188,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--copies", type=int, default=8, help="copies of each 5-agent env")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
     parser.add_argument("--scenario", default="paper")
+    parser.add_argument("--updates", type=int, default=5, help="updates of the in-process trainer")
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
+    print("In-process trainer (onpolicy.yml, training preset), agent-steps/s:")
+    rates = {
+        algo: onpolicy_rate(algo, args.scenario, args.updates, args.threads)
+        for algo in ("ppo", "mappo")
+    }
+    for algo, rate in rates.items():
+        print(f"  ours {algo:5s} {args.scenario:>10s}            : {rate:>8,.0f}")
+    vmas = vmas_mappo_rate(3)
+    if vmas is None:
+        print("  BenchMARL MAPPO VMAS navigation: skipped (vmas is not importable)")
+    else:
+        print(f"  BenchMARL MAPPO VMAS navigation    : {vmas:>8,.0f}")
+        print(f"  ratio ours mappo / BenchMARL VMAS   : {rates['mappo'] / vmas:>8.3f}")
     training, settings = split_params(load_hyperparams("ppo", "paper"), PPO)
     training["copies"] = args.copies
 

@@ -20,7 +20,7 @@ from uav_formation_baselines.benchmarl_train import (  # noqa: E402
     main,
     make_experiment,
 )
-from uav_formation_env.config_io import resolve_scenario  # noqa: E402
+from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
 
 TINY = {
@@ -37,9 +37,10 @@ TINY = {
 
 
 def test_config_layers_and_unknown_keys(tmp_path: Path) -> None:
-    config = load_config("masac", frames=1000, task={"reward": "raw"})
+    config = load_config("masac", frames=1000, task={"reward": "paper"})
     assert config.frames == 1000 and config.optimizer_steps == 100
-    assert config.task["reward"] == "raw" and config.task["corridor_width"] == 200.0
+    assert config.task["reward"] == "paper"
+    assert load_config("mappo").task["reward"] == "train"
     with pytest.raises(ValueError, match="unknown key 'framez'"):
         load_config("mappo", framez=3)
     with pytest.raises(ValueError, match="algo must be one of"):
@@ -54,10 +55,11 @@ def test_exported_actor_is_the_deterministic_benchmarl_policy(algo: str, tmp_pat
     task = formation_task("paper", config)
     experiment = make_experiment(algo, task, config, seed=0, folder=tmp_path)
     rng = np.random.default_rng(0)
-    obs = torch.as_tensor(rng.normal(scale=0.5, size=(3, 5, 47)).astype(np.float32))
+    dim = 47 + 2  # the training preset's observation: the paper's layout and the route slots
+    obs = torch.as_tensor(rng.normal(scale=0.5, size=(3, 5, dim)).astype(np.float32))
     with set_exploration_type(ExplorationType.DETERMINISTIC), torch.no_grad():
         td = experiment.policy(TensorDict({("uav", "observation"): obs}, batch_size=[3]))
-        exported = actor_module(experiment)(obs.reshape(15, 47))
+        exported = actor_module(experiment)(obs.reshape(15, dim))
     torch.testing.assert_close(exported[:, :3], td["uav", "action"].reshape(15, 3))
     torch.testing.assert_close(exported[:, 3:].exp(), td["uav", "scale"].reshape(15, 3))
 
@@ -67,11 +69,12 @@ def test_cli_trains_and_exports_a_policy_the_runner_flies(tmp_path: Path) -> Non
     assert main(["--algo", "ippo", "--out", str(tmp_path), "--set", *sets]) == 0
     rows = (tmp_path / "progress.csv").read_text().strip().splitlines()
     assert len(rows) == 3  # header + 2 iterations of 200 frames
-    policy = make_policy(str(tmp_path), resolve_scenario("paper"))
-    assert policy.act_batch(np.zeros((2, 5, 47), dtype=np.float32)).shape == (2, 5, 3)
+    scenario = with_overrides(resolve_scenario("paper"), {"observation.route_offset": True})
+    policy = make_policy(str(tmp_path), scenario)
+    assert policy.act_batch(np.zeros((2, 5, 49), dtype=np.float32)).shape == (2, 5, 3)
     heldout = json.loads((tmp_path / "heldout.json").read_text())  # the end-of-training report
     assert heldout["seeds"] == [0, 1, 2] and heldout["reference"] == "lfpio"
-    assert heldout["training_reward"] < 0  # the last batch's transformed reward
+    assert 0 < heldout["training_reward"] <= 1  # the last batch's reward "train", per step
 
 
 def test_cli_reports_bad_settings_in_one_line(tmp_path: Path, capsys) -> None:

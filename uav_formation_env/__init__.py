@@ -3,7 +3,8 @@
 ``parallel_env()`` / ``env()`` give the PettingZoo environment ``uav_formation_v0``;
 ``gymnasium.make("uav_formation_env/Formation-v0")`` the centralised single-agent view and
 ``gymnasium.make_vec("uav_formation_env/Formation-v0", num_envs=B)`` B batched copies of it (after
-``import uav_formation_env``).
+``import uav_formation_env``); ``uav_formation_env/FormationTrain-v0`` the same under the
+training preset (:mod:`uav_formation_env.tasks`).
 """
 
 from __future__ import annotations
@@ -15,11 +16,15 @@ from uav_formation_env.envs import env, parallel_env, vec_env
 __version__ = "0.1.0"
 
 GYM_ID = "uav_formation_env/Formation-v0"
-if GYM_ID not in gymnasium.registry:
-    gymnasium.register(
-        id=GYM_ID,
-        entry_point="uav_formation_env.envs.gym_env:FormationGymEnv",
-        vector_entry_point="uav_formation_env.envs.gym_vector:FormationVectorEnv",
-    )
+# the same view under the training preset (uav_formation_env.tasks): the learnable task
+TRAIN_GYM_ID = "uav_formation_env/FormationTrain-v0"
+for _id, _kwargs in ((GYM_ID, {}), (TRAIN_GYM_ID, {"reward": "train"})):
+    if _id not in gymnasium.registry:
+        gymnasium.register(
+            id=_id,
+            entry_point="uav_formation_env.envs.gym_env:FormationGymEnv",
+            vector_entry_point="uav_formation_env.envs.gym_vector:FormationVectorEnv",
+            kwargs=_kwargs,
+        )
 
-__all__ = ["GYM_ID", "__version__", "env", "parallel_env", "vec_env"]
+__all__ = ["GYM_ID", "TRAIN_GYM_ID", "__version__", "env", "parallel_env", "vec_env"]

@@ -474,8 +474,13 @@ class InitialStateConfig:
     velocity: Vec3 = (20.0, 0.0, 0.0)  # [m/s]
     # minimum distance between two UAVs at t = 0, 2.5x the default collision distance [m]
     min_spacing: float = 5.0
+    # None: uniform in the box (the paper's); a value: a start in formation, each UAV at its slot
+    # about the box's centre, moved by U(-jitter, jitter) on each horizontal axis [m]
+    formation_jitter: float | None = None
 
     def __post_init__(self) -> None:
+        if self.formation_jitter is not None:
+            _non_negative(self.formation_jitter, "initial.formation_jitter")
         _vec(self.position_low, 3, "initial.position_low")
         _vec(self.position_high, 3, "initial.position_high")
         _vec(self.velocity, 3, "initial.velocity")
@@ -566,8 +571,16 @@ class ObservationConfig:
     # every other UAV of the copy (all pairs). Must be >= cost.separation_distance and
     # collision.uav_distance, so that J_i and collisions are the same either way [m]
     sensing_radius: float | None = None
+    # append UAV i's offset from its slot on the preset route, horizontal (x, y) / 100 m, clipped
+    # ±10: the mission's route error, which J_i does not hold (2 slots at the end)
+    route_offset: bool = False
 
     def __post_init__(self) -> None:
+        _require(
+            isinstance(self.route_offset, bool),
+            "observation.route_offset",
+            f"must be true or false, got {self.route_offset!r}",
+        )
         if self.sensing_radius is not None:
             _positive(self.sensing_radius, "observation.sensing_radius")
         _require(
@@ -585,9 +598,58 @@ class ObservationConfig:
             )
 
 
-REWARD_TRANSFORMS = ("raw", "scaled", "log1p")
+REWARD_TRANSFORMS = ("raw", "scaled", "log1p", "train")
+ACTION_MODES = ("acceleration", "velocity")
 START_MODES = ("zero", "random", "staggered")
 START_CONTROLLERS = ("heuristic",)
+
+
+@dataclass(frozen=True)
+class TrainingRewardConfig:
+    """The named training reward ``episode.reward = "train"`` (docs/training.md has the table).
+
+    Per UAV and step, a weighted sum of kernels K(e², σ) = 1 / (1 + e² / σ²) in (0, 1], so that
+    the reward is O(1), positive, and ending an episode early stops paying:
+
+    - J_i's terms, each normalised by its weight and a scale: ``velocity`` K(|v_i - v^d_i|², σ_v),
+      ``formation`` K(|ε_ij|² averaged over the UAVs j that i hears, σ_f), ``energy``
+      K(|u_i|², σ_u), ``separation`` K(Σ_j max(0, d_s - d_ij)², σ_s);
+    - the mission's terms: ``route`` K(e_i², σ_r) with e_i UAV i's horizontal offset from its
+      slot on the preset route, ``clearance`` K(max(0, c - D_i)², σ_c) with D_i the distance to
+      the nearest obstacle surface;
+    - ``termination_penalty`` subtracted from every agent in a step that terminates its copy (a
+      collision in ``"terminate"`` mode, or leaving the corridor).
+    """
+
+    velocity: float = 0.15  # weight of the velocity kernel [-]
+    formation: float = 0.35  # weight of the formation kernel [-]
+    route: float = 0.25  # weight of the route kernel [-]
+    energy: float = 0.05  # weight of the energy kernel [-]
+    separation: float = 0.1  # weight of the separation kernel [-]
+    clearance: float = 0.1  # weight of the obstacle clearance kernel [-]
+    velocity_scale: float = 5.0  # σ_v [m/s]
+    formation_scale: float = 20.0  # σ_f [m]
+    route_scale: float = 30.0  # σ_r [m]
+    energy_scale: float = 2.0  # σ_u [m/s^2]
+    separation_scale: float = 5.0  # σ_s [m]
+    clearance_margin: float = 10.0  # c, clearance wanted from an obstacle's surface [m]
+    clearance_scale: float = 5.0  # σ_c [m]
+    termination_penalty: float = 10.0  # subtracted in a terminating step [-]
+
+    def __post_init__(self) -> None:
+        for name in ("velocity", "formation", "route", "energy", "separation", "clearance"):
+            _non_negative(getattr(self, name), f"episode.train.{name}")
+        for name in (
+            "velocity_scale",
+            "formation_scale",
+            "route_scale",
+            "energy_scale",
+            "separation_scale",
+            "clearance_scale",
+        ):
+            _positive(getattr(self, name), f"episode.train.{name}")
+        _non_negative(self.clearance_margin, "episode.train.clearance_margin")
+        _non_negative(self.termination_penalty, "episode.train.termination_penalty")
 
 
 @dataclass(frozen=True)
@@ -624,8 +686,21 @@ class EpisodeConfig:
     corridor_penalty: float = 0.0  # cost added to each agent on leaving the corridor [-]
     start: str = "zero"  # "zero", "random" or "staggered": where along the mission episodes start
     start_controller: str = "heuristic"  # flies a copy to its start step
+    train: TrainingRewardConfig = field(default_factory=TrainingRewardConfig)  # reward "train"
+    # "acceleration": a · u_max; "velocity": a set-point v^d_i + a · velocity_range tracked by
+    # u = clip(velocity_gain (set-point - v_i), ±u_max) (core.dynamics.velocity_setpoint_input)
+    action: str = "acceleration"
+    velocity_range: float = 10.0  # set-point offset at |a| = 1 [m/s]
+    velocity_gain: float = 1.0  # inner-loop gain of the velocity mode [1/s]
 
     def __post_init__(self) -> None:
+        _require(
+            self.action in ACTION_MODES,
+            "episode.action",
+            f"must be one of {ACTION_MODES}, got {self.action!r}",
+        )
+        _positive(self.velocity_range, "episode.velocity_range")
+        _positive(self.velocity_gain, "episode.velocity_gain")
         _require(
             self.reward in REWARD_TRANSFORMS,
             "episode.reward",

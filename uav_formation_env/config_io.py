@@ -18,11 +18,13 @@ import yaml
 
 from uav_formation_env.config import FormationConfig, Scenario
 from uav_formation_env.scenarios import (
+    hold_scenario,
     make_scenario,
     random_fields_scenario,
     random_routes_scenario,
     random_swarm_scenario,
     swarm_scenario,
+    track_scenario,
     windy_scenario,
 )
 
@@ -252,6 +254,9 @@ def paper_scenario() -> Scenario:
 
 SCENARIOS: dict[str, typing.Callable[[], Scenario]] = {
     "paper": paper_scenario,
+    # the task ladder's lower rungs (uav_formation_env.tasks)
+    "hold": hold_scenario,
+    "track": track_scenario,
     "open_field": lambda: make_scenario(obstacles="none"),
     "windy": windy_scenario,
     "random_obstacles": lambda: make_scenario(obstacles="random", seed=0),

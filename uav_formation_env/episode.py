@@ -49,18 +49,26 @@ import numpy as np
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.array_api import namespace, to_numpy
 from uav_formation_env.core.cost import anchored
+from uav_formation_env.core.dynamics import velocity_setpoint_input
 from uav_formation_env.core.local_observation import (
     build_local_observations,
     observation_bounds,
     observation_size,
 )
 from uav_formation_env.core.observation import (
+    DISTANCE_CLIP,
     DISTANCE_SCALE,
     ESTIMATE_SCALE,
     VELOCITY_SCALE,
     build_observations,
 )
-from uav_formation_env.core.reference import blend_offset, next_leg, route_error
+from uav_formation_env.core.reference import (
+    blend_offset,
+    next_leg,
+    route_error,
+    slot_route_offset,
+)
+from uav_formation_env.core.training_reward import reward_terms, training_reward
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.sim import FormationSim, SeedLike, StepResult
 
@@ -151,6 +159,24 @@ def encode_observations(
         the (B, N, k) UAV in each neighbour slot (-1 where absent; who UAV i exchanges plans
         with), else None.
     """
+    obs, neighbour_index = _encode_layout(sim, result)
+    if sim.scenario.observation.route_offset:
+        xp = namespace(obs)
+        route = xp.clip(route_offsets(sim, result) / DISTANCE_SCALE, -DISTANCE_CLIP, DISTANCE_CLIP)
+        obs = xp.concat((obs, xp.astype(route, obs.dtype)), axis=-1)
+    return obs, neighbour_index
+
+
+def route_offsets(sim: FormationSim, result: StepResult) -> np.ndarray:
+    """(B, N, 2) each UAV's horizontal offset from its slot on the preset route [m]
+    (:func:`~uav_formation_env.core.reference.slot_route_offset`)."""
+    positions = result.z[..., :3]
+    slots = anchored(result.z, sim.offsets, sim.scenario.formation.mirrored_offsets)[..., :3]
+    return slot_route_offset(sim.schedule, result.t, positions, slots, sim.route_start)
+
+
+def _encode_layout(sim: FormationSim, result: StepResult) -> tuple[np.ndarray, np.ndarray | None]:
+    """The observation layout of ``scenario.observation.kind`` (without the route slots)."""
     scenario = sim.scenario
     config = scenario.observation
     fast = None if sim.fast_path is None else sim.fast_path.observation(result)
@@ -243,6 +269,8 @@ class EpisodeStep:
     # (B, N, k) the UAV in each neighbour slot of the local layout (-1: absent), for policies
     # that exchange plans (act_batch(obs, neighbour_index)); None for the full layout
     neighbour_index: np.ndarray | None = None
+    # name -> (B, N) weighted kernels of the training reward (reward "train"), else None
+    terms: dict[str, np.ndarray] | None = None
 
     @property
     def collided(self) -> np.ndarray:
@@ -399,8 +427,22 @@ class FormationEpisodes:
         # clip for finite values, without numpy's Python wrappers
         return xp.minimum(xp.maximum(actions, -1.0), 1.0)
 
+    def _input(self, clipped: np.ndarray) -> np.ndarray:
+        """(B, N, 3) formation input u_n of clipped actions under ``episode.action``."""
+        episode = self.scenario.episode
+        if episode.action == "velocity":
+            return velocity_setpoint_input(
+                clipped,
+                self.sim.z[..., 3:],
+                self.sim.last.reference_velocity,
+                episode.velocity_range,
+                episode.velocity_gain,
+                self.u_max,
+            )
+        return clipped * self.u_max
+
     def _step(self, clipped: np.ndarray) -> EpisodeStep:
-        result = self.sim.step(clipped * self.u_max)
+        result = self.sim.step(self._input(clipped))
         cost = result.cost.total
         penalty = self.penalties(result)
         left = self._left_corridor(result) if self._corridor else self._no_copy
@@ -414,9 +456,16 @@ class FormationEpisodes:
         else:  # only the duration ends episodes
             truncated = result.truncated
         obs, neighbour_index = encode_observations(self.sim, result)
+        terms = None
+        if self.scenario.episode.reward == "train":
+            terms = self.reward_terms(result)
+            penalty_end = self.scenario.episode.train.termination_penalty
+            reward = training_reward(terms, terminated, penalty_end)
+        else:
+            reward = self.reward(cost, penalty)
         step = EpisodeStep(
             observation=obs,
-            reward=self.reward(cost, penalty),
+            reward=reward,
             cost=cost,
             penalty=penalty,
             terminated=terminated,
@@ -425,6 +474,7 @@ class FormationEpisodes:
             diverged=diverged,
             result=result,
             neighbour_index=neighbour_index,
+            terms=terms,
         )
         if self.autoreset and (done := step.done).any():
             step.final_observation = step.observation
@@ -490,8 +540,25 @@ class FormationEpisodes:
         return result
 
     # ------------------------------------------------------------------ rules
+    def reward_terms(self, result: StepResult) -> dict[str, np.ndarray]:
+        """name -> (B, N) weighted kernels of the training reward of a step
+        (:mod:`uav_formation_env.core.training_reward`)."""
+        offsets = route_offsets(self.sim, result)
+        distance = self.xp.linalg.vector_norm(offsets, axis=-1)
+        scenario = self.scenario
+        degree = self.xp.sum(self.xp.astype(result.adjacency != 0, distance.dtype), axis=-1)
+        return reward_terms(
+            scenario.episode.train,
+            scenario.cost,
+            result.cost,
+            distance,
+            result.obstacle_distance,
+            degree,
+        )
+
     def reward(self, cost: np.ndarray, penalty: np.ndarray) -> np.ndarray:
-        """(B, N) reward of a stage cost and penalty through ``episode.reward``."""
+        """(B, N) reward of a stage cost and penalty through ``episode.reward`` (the J_i
+        transforms; ``"train"`` is :meth:`reward_terms` summed)."""
         episode = self.scenario.episode
         if episode.reward == "raw":
             return -cost if penalty is self._no_penalty else -(cost + penalty)

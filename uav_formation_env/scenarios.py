@@ -20,6 +20,9 @@ Named scenarios of this module (registered in :data:`uav_formation_env.config_io
   :data:`~uav_formation_env.formations.SHAPES` (10 m spacing, 4-nearest graph), a field like
   ``random_fields``'s, a constant horizontal wind of 0-0.3 m/s² in a uniform direction and
   gusts of std 0-0.1 m/s²; the paper's route.
+- ``hold`` (:func:`hold_scenario`) and ``track`` (:func:`track_scenario`): the lower rungs of
+  the task ladder (:mod:`uav_formation_env.tasks`): the paper's formation and disturbance on a
+  straight 60 s route, and on the paper's route, both without obstacles.
 - ``swarm_20``, ``swarm_50``, ``swarm_100`` (:func:`swarm_scenario`): concrete scenarios with N
   UAVs in a 10 m grid (a V of 100 would be 1 km wide) and a 4-nearest graph, a start box grown
   to about (3 min_spacing)² per UAV, and the paper's two obstacles on the paper's route with
@@ -60,6 +63,7 @@ from uav_formation_env.config import (
     RouteConfig,
     Scenario,
     SceneConfig,
+    ScheduleConfig,
 )
 from uav_formation_env.formations import SHAPES, formation_offsets, k_nearest_adjacency
 
@@ -332,6 +336,7 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
 
 
 __all__ = [
+    "hold_scenario",
     "leader_chain_adjacency",
     "make_scenario",
     "random_fields_scenario",
@@ -340,6 +345,25 @@ __all__ = [
     "shape_formation",
     "start_box_for",
     "swarm_scenario",
+    "track_scenario",
     "v_offsets",
     "windy_scenario",
 ]
+
+
+def hold_scenario() -> Scenario:
+    """The first rung of the task ladder: the paper's formation, disturbance and observer on a
+    straight route at the paper's first leg (20 m/s along x) for 60 s, without obstacles."""
+    base = Scenario()
+    return replace(
+        base,
+        name="hold",
+        duration=60.0,
+        schedule=ScheduleConfig(times=(), velocities=(base.schedule.velocities[0],)),
+        avoidance=replace(base.avoidance, obstacles=()),
+    )
+
+
+def track_scenario() -> Scenario:
+    """The second rung: the paper's route, formation and disturbance without obstacles."""
+    return replace(make_scenario(obstacles="none"), name="track")

@@ -47,7 +47,7 @@ from uav_formation_env.core.array_api import copy as copy_array
 from uav_formation_env.core.cost import CostTerms, stage_cost
 from uav_formation_env.core.disturbances import CopyDisturbance, Disturbance
 from uav_formation_env.core.dynamics import zoh_step
-from uav_formation_env.core.initial import initial_positions
+from uav_formation_env.core.initial import formation_positions, initial_positions
 from uav_formation_env.core.observer import (
     ObserverState,
     compensation,
@@ -322,7 +322,13 @@ class FormationSim:
             self._seed_streams[b], self._rngs[b], self.scenes[b] = stream, rng, scene
             initial = scene.initial
             low, high = np.asarray(initial.position_low), np.asarray(initial.position_high)
-            z[row, :, :3] = initial_positions(rng, N, low, high, initial.min_spacing)
+            if initial.formation_jitter is None:
+                z[row, :, :3] = initial_positions(rng, N, low, high, initial.min_spacing)
+            else:
+                sign = -1.0 if scene.formation.mirrored_offsets else 1.0
+                slots = sign * np.asarray(scene.formation.offsets, dtype=float)[:, :3]
+                centre = (low + high) / 2
+                z[row, :, :3] = formation_positions(rng, slots, centre, initial.formation_jitter)
             z[row, :, 3:] = initial.velocity
             if cfg.scene is not None:
                 self._set_scene(b, scene)

@@ -142,3 +142,32 @@ def inverse_map(
         bank=np.arctan2(tau[..., 1], tau[..., 2]),
         tau=tau,
     )
+
+
+def velocity_setpoint_input(
+    action: np.ndarray,
+    velocity: np.ndarray,
+    reference: np.ndarray,
+    velocity_range: float,
+    gain: float,
+    u_max: float,
+) -> np.ndarray:
+    """The formation input of the velocity action mode: a proportional loop on a set-point.
+
+    ``u = clip(gain · (v^d + a · velocity_range - v), ±u_max)``: action 0 tracks the reference
+    velocity, |a| = 1 asks for ``velocity_range`` more or less per axis.
+
+    Args:
+        action: (..., 3) normalised actions in [-1, 1].
+        velocity: (..., 3) current velocities v_i [m/s].
+        reference: (..., 3) current reference velocities v^d_i [m/s].
+        velocity_range: set-point offset at |a| = 1 [m/s].
+        gain: loop gain [1/s].
+        u_max: per-axis bound [m/s^2].
+
+    Returns:
+        (..., 3) formation input u_n [m/s^2], in the arrays' library.
+    """
+    xp = namespace(action)
+    command = gain * (reference + action * velocity_range - velocity)
+    return xp.clip(command, -u_max, u_max)

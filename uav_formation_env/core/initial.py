@@ -61,3 +61,23 @@ def initial_positions(
         f"{tuple(low)}..{tuple(high)} after {MAX_REDRAWS} redraws; enlarge the box or lower "
         "min_spacing"
     )
+
+
+def formation_positions(
+    rng: np.random.Generator, slots: np.ndarray, centre: np.ndarray, jitter: float
+) -> np.ndarray:
+    """A start in formation: each UAV at its slot about ``centre``, moved horizontally by
+    U(-jitter, jitter) per axis (drawn from the copy's generator).
+
+    Args:
+        rng: the copy's generator.
+        slots: (N, 3) formation slot positions relative to the formation's reference [m].
+        centre: (3,) where the slots' mean goes [m].
+        jitter: [m].
+
+    Returns:
+        (N, 3) [m].
+    """
+    positions = centre + slots - slots.mean(axis=0)
+    positions[:, :2] += rng.uniform(-jitter, jitter, size=(len(slots), 2))
+    return positions

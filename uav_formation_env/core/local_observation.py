@@ -572,11 +572,12 @@ def decode_local_observations(
     xp = namespace_of(obs)
     if not is_numpy(xp):
         obs = xp.astype(obs, xp.float64)
-    if obs.shape[-1] != dim:
+    if obs.shape[-1] not in (dim, dim + ROUTE_SLOTS):
         raise ValueError(
-            f"expected a last axis of {dim} (k={k}, m={m}, nearest={nearest}), got "
-            f"{tuple(obs.shape)}"
+            f"expected a last axis of {dim} (k={k}, m={m}, nearest={nearest}), or "
+            f"{dim + ROUTE_SLOTS} with the route slots, got {tuple(obs.shape)}"
         )
+    obs = obs[..., :dim]  # the route slots (observation.route_offset) are not decoded
     lead = tuple(obs.shape[:-1])
     slots = k + nearest
     end = OWN_DIM + NEIGHBOUR_DIM * slots
@@ -674,21 +675,31 @@ def slot_frame(decoded: DecodedLocalObservation) -> SlotFrame:
     )
 
 
+# slots appended by ``observation.route_offset``: UAV i's offset from its slot on the preset route,
+# horizontal (x, y) / 100 m, clipped ±10 (episode.route_offsets)
+ROUTE_SLOTS = 2
+
+
 def observation_size(scenario: Scenario, n_uav: int | None = None) -> int:
     """Length of one agent's observation under ``scenario.observation`` ("full": the layout of
     :mod:`uav_formation_env.core.observation` for N UAVs, the scenario's N if None; "local":
     this module's, whatever N)."""
     config = scenario.observation
+    route = ROUTE_SLOTS if config.route_offset else 0
     if config.kind == "local":
-        return local_observation_dim(config.neighbours, config.obstacles, config.nearest)
-    return observation_dim(scenario.n_uav if n_uav is None else n_uav)
+        return local_observation_dim(config.neighbours, config.obstacles, config.nearest) + route
+    return observation_dim(scenario.n_uav if n_uav is None else n_uav) + route
 
 
 def observation_bounds(scenario: Scenario, n_uav: int | None = None) -> tuple[np.ndarray, ...]:
     """(dim,) float32 lower and upper bounds of every observation slot."""
     config = scenario.observation
     if config.kind == "local":
-        return local_observation_bounds(config.neighbours, config.obstacles, config.nearest)
+        low, high = local_observation_bounds(config.neighbours, config.obstacles, config.nearest)
+        if config.route_offset:
+            clip = np.full(ROUTE_SLOTS, DISTANCE_CLIP, dtype=np.float32)
+            low, high = np.concatenate((low, -clip)), np.concatenate((high, clip))
+        return low, high
     dim = observation_size(scenario, n_uav)
     bound = np.full(dim, OBSERVATION_BOUND, dtype=np.float32)
     return -bound, bound

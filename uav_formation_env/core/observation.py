@@ -274,7 +274,9 @@ def decode_observations(obs: np.ndarray, n_uav: int) -> DecodedObservation:
     xp = namespace_of(obs)
     if not is_numpy(xp):
         obs = xp.astype(obs, xp.float64)
-    other = obs[..., OWN_DIM:].reshape(*obs.shape[:-1], n_uav - 1, OTHER_DIM)
+    # slots beyond the layout (observation.route_offset) are not the decoders' to read
+    other = obs[..., OWN_DIM : observation_dim(n_uav)]
+    other = other.reshape(*obs.shape[:-1], n_uav - 1, OTHER_DIM)
     relative = xp.concat(
         (other[..., 1:4] * FORMATION_SCALE, other[..., 4:7] * VELOCITY_SCALE), axis=-1
     )

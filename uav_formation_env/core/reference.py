@@ -47,6 +47,7 @@ __all__ = [
     "reference_preview",
     "route_error",
     "schedule_arrays",
+    "slot_route_offset",
 ]
 
 _TIME_TOL = 1e-9  # tolerance of the schedule's "t <= times[k]" [s]
@@ -346,6 +347,39 @@ def route_error(
     route = start + preset_displacement(schedule, t)
     offset = (centroid - route)[..., :2]
     return xp.sqrt((offset**2).sum(axis=-1))
+
+
+def slot_route_offset(
+    schedule: Schedule,
+    t: np.ndarray,
+    positions: np.ndarray,
+    anchored: np.ndarray,
+    start: np.ndarray,
+) -> np.ndarray:
+    """Horizontal offset vector of each UAV from its slot on the preset route.
+
+    UAV i's slot is where it would be with the formation centroid on the route and the others
+    where they are: ``(a_i - mean_j a_j) + centroid - route(t)`` with ``a`` the positions
+    relative to the formation slots (``core.cost.anchored``).
+
+    Args:
+        schedule: the preset velocity (per copy: ``t`` is (B,)).
+        t: (B,) time [s].
+        positions: (B, N, 3) UAV positions [m].
+        anchored: (B, N, 3) positions minus formation offsets [m].
+        start: (B, 3) centroid at t = 0 [m].
+
+    Returns:
+        (B, N, 2) [m]; its norm at a UAV in its slot is :func:`route_error` of the centroid.
+    """
+    xp = namespace(positions, start, t)
+    if not is_numpy(xp):
+        t = as_float(t, like=positions if is_numpy(namespace_of(t)) else t)
+        start = as_float(start, like=positions)
+    route = start + preset_displacement(schedule, t)
+    centroid = xp.mean(positions, axis=1)
+    spread = anchored - xp.mean(anchored, axis=1, keepdims=True)
+    return (spread + (centroid - route)[:, None, :])[..., :2]
 
 
 def reference_preview(

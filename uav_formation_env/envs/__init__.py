@@ -14,13 +14,27 @@ from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.envs.aec import UAVFormationAECEnv
 from uav_formation_env.envs.parallel import UAVFormationParallelEnv
 from uav_formation_env.extras import require
+from uav_formation_env.tasks import TRAINING_PRESET
+
+REWARD_CHOICES = (None, "paper", "train")  # the ``reward`` argument of every view
 
 
 def resolve_with_overrides(
     scenario: str | Path | Scenario | Mapping[str, Any], overrides: Mapping[str, Any]
 ) -> Scenario:
-    """A scenario from a name / YAML path / mapping / object, with validated field overrides."""
+    """A scenario from a name / YAML path / mapping / object, with validated field overrides.
+
+    The override ``reward="train"`` puts the scenario under the training preset
+    (:data:`uav_formation_env.tasks.TRAINING_PRESET`) before the others; ``reward="paper"`` (or
+    None) keeps the scenario's own reward, -J_i by default.
+    """
+    overrides = dict(overrides)
+    reward = overrides.pop("reward", None)
+    if reward not in REWARD_CHOICES:
+        raise ValueError(f"reward must be one of {REWARD_CHOICES}, got {reward!r}")
     resolved = resolve_scenario(scenario)
+    if reward == "train":
+        overrides = {**TRAINING_PRESET, **overrides}
     return with_overrides(resolved, overrides) if overrides else resolved
 
 
@@ -39,7 +53,8 @@ def parallel_env(
         **overrides: single fields, validated like the scenario: nested mappings
             (``observer={"enabled": False}``) or double-underscore paths
             (``observer__enabled=False``), e.g. the training devices of the episode layer
-            (``episode__reward="log1p"``, ``episode__corridor_width=200.0``).
+            (``episode__reward="log1p"``, ``episode__corridor_width=200.0``); ``reward="train"``
+            gives the learnable training task (:mod:`uav_formation_env.tasks`).
     """
     return UAVFormationParallelEnv(
         resolve_with_overrides(scenario, overrides), render_mode, info_mode

@@ -51,7 +51,9 @@ trainer.
 **Info** of agent i (``info_mode="numeric"``, the default: every value a number or a fixed-shape
 array, so that TorchRL, BenchMARL and RLlib can stack them): ``J`` (stage cost, the raw J_i
 whatever the reward transform), ``cost_formation``, ``cost_energy``, ``cost_terminal``,
-``cost_velocity``, ``cost_separation``, ``cost_obstacle`` (its terms), ``neighbours`` ((N,) bool mask of the agents it
+``cost_velocity``, ``cost_separation``, ``cost_obstacle`` (its terms), under the training reward
+``reward_velocity``, ``reward_formation``, ``reward_route``, ``reward_energy``,
+``reward_separation``, ``reward_clearance`` (its weighted kernels, docs/training.md), ``neighbours`` ((N,) bool mask of the agents it
 receives from this step), ``disturbance`` and ``disturbance_estimate`` (3,) [m/s²],
 ``reference_velocity`` (3,) [m/s], ``group`` (sub-formation id), ``obstacle_distance`` (to the
 nearest obstacle surface [m], inf without obstacles), ``min_separation`` (to the nearest other UAV
@@ -225,6 +227,10 @@ class UAVFormationParallelEnv(ParallelEnv):
         terminated, truncated = bool(step.terminated[0]), bool(step.truncated[0])
         obs = self._observations()
         infos = self._infos(penalty, total)
+        if step.terms is not None:  # the training reward's terms, as reward_<term>
+            for name, values in step.terms.items():
+                for info, value in zip(infos.values(), values[0].tolist()):
+                    info[f"reward_{name}"] = value
         rewards = dict(zip(self.agents, step.reward[0].tolist()))
         terminations = dict.fromkeys(self.agents, terminated)
         truncations = dict.fromkeys(self.agents, truncated)

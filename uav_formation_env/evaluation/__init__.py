@@ -65,6 +65,7 @@ from uav_formation_env.evaluation.mission import (
     mission_summary,
     mission_table,
     preset_route,
+    wilson_ci95,
 )
 from uav_formation_env.evaluation.output import (
     RECORD_COLUMNS,
@@ -109,6 +110,7 @@ __all__ = [
     "json_ready",
     "make_policy",
     "mean_ci95",
+    "wilson_ci95",
     "mission_metrics",
     "mission_of",
     "mission_summary",

@@ -106,6 +106,7 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
     """The metrics of the module docstring as a JSON-ready dict."""
     realised = batch.stage_cost.sum(axis=0)  # (B, N)
     _, cost_ci95 = mean_ci95(realised.mean(axis=1))
+    returns = batch.reward.sum(axis=0).mean(axis=1)  # (B,) per UAV
     rmse = formation_rmse(batch)
     obs_rms = observer_rms(batch)
     centre = batch.obstacle_center.min(axis=(0, 1)) if batch.obstacle_center.size else None
@@ -129,6 +130,11 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
         "realised_cost_terms": {
             name: float(per_seed.mean()) for name, per_seed in cost_terms_per_seed(batch).items()
         },
+        # the episode layer's reward (the scenario's episode.reward), summed, mean over UAVs
+        "reward": batch.scenario.episode.reward,
+        "return_mean": float(returns.mean()),
+        "return_ci95": mean_ci95(returns)[1],
+        "return_per_seed": returns.tolist(),
         "mission": mission_summary(mission_of(batch), list(batch.seeds)),
         "formation_rmse_m": float(rmse.mean()),
         "formation_rmse_m_per_seed": rmse.tolist(),
@@ -178,6 +184,7 @@ def summarise_groups(batches: list[EpisodeBatch]) -> dict[str, Any]:
     seeds = [seed for batch in batches for seed in batch.seeds]
     realised = np.concatenate([batch.stage_cost.sum(axis=0).mean(axis=1) for batch in batches])
     mean, cost_ci95 = mean_ci95(realised)
+    returns = np.concatenate([batch.reward.sum(axis=0).mean(axis=1) for batch in batches])
     triggers = [p["triggers_per_uav_per_seed"] for p in parts]
     per_seed_triggers = (
         None
@@ -206,6 +213,10 @@ def summarise_groups(batches: list[EpisodeBatch]) -> dict[str, Any]:
         "realised_cost_terms": {
             name: float(np.concatenate([t[name] for t in terms]).mean()) for name in terms[0]
         },
+        "reward": first.scenario.episode.reward,
+        "return_mean": float(returns.mean()),
+        "return_ci95": mean_ci95(returns)[1],
+        "return_per_seed": returns.tolist(),
         "mission": mission_summary(
             concatenate_missions([mission_of(batch) for batch in batches]), seeds
         ),

@@ -47,6 +47,16 @@ _T95 = (
 )  # fmt: skip
 
 
+def wilson_ci95(successes: int, trials: int) -> tuple[float, float]:
+    """Wilson score 95 % interval (low, high) of a success rate, e.g. missions completed."""
+    if trials <= 0:
+        raise ValueError(f"wilson_ci95 needs trials >= 1, got {trials}")
+    z, p = 1.959963984540054, successes / trials
+    centre = (p + z * z / (2 * trials)) / (1 + z * z / trials)
+    half = z * np.sqrt(p * (1 - p) / trials + z * z / (4 * trials * trials)) / (1 + z * z / trials)
+    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+
+
 def mean_ci95(values: np.ndarray) -> tuple[float, float]:
     """Mean and half-width of its 95 % confidence interval (Student t; 0 for one value).
 

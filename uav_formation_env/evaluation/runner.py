@@ -48,6 +48,7 @@ class EpisodeBatch:
     disturbance: np.ndarray  # (T, B, N, 3) [m/s^2]
     stage_cost: np.ndarray  # (T, B, N) J_i stage cost of the transition
     cost_terms: dict[str, np.ndarray]  # name -> (T, B, N)
+    reward: np.ndarray  # (T, B, N) the episode layer's reward (scenario.episode.reward)
     collision: np.ndarray  # (T, B, N) bool, after the step
     activation_time: np.ndarray  # (B, O) [s], NaN if never
     restore_time: np.ndarray  # (B, O) [s], NaN if never
@@ -239,6 +240,7 @@ def run_episodes(
                 to_numpy(result.disturbance),
                 to_numpy(result.cost.total),
                 {name: to_numpy(v) for name, v in result.cost.as_dict().items()},
+                to_numpy(step.reward),
                 to_numpy(result.collision),
             )
         )
@@ -256,7 +258,7 @@ def run_episodes(
             triggered = np.asarray(records.triggered, dtype=bool)
             j_pre = np.asarray(records.j_pre, dtype=float)
             j_exec = np.asarray(records.j_exec, dtype=float)
-    u_n, u_applied, disturbance, stage, terms, collision = zip(*steps)
+    u_n, u_applied, disturbance, stage, terms, reward, collision = zip(*steps)
     gap_arrays = [np.stack(a) for a in zip(*gaps)] if gaps else [None, None, None]
     topo = sim.topology
     return EpisodeBatch(
@@ -276,6 +278,7 @@ def run_episodes(
         disturbance=np.stack(disturbance),
         stage_cost=np.stack(stage),
         cost_terms={name: np.stack([t[name] for t in terms]) for name in terms[0]},
+        reward=np.stack(reward),
         collision=np.stack(collision),
         activation_time=np.array(to_numpy(topo.activation_time), dtype=float),
         restore_time=np.array(to_numpy(topo.restore_time), dtype=float),

@@ -1,0 +1,59 @@
+"""The task ladder and the training preset: a learnable task beside the paper's.
+
+The paper's reward, -J_i, stays every scenario's default and the figure every evaluation reports.
+:data:`TRAINING_PRESET` is the named training task of the episode layer: the bounded reward
+``"train"`` (:mod:`uav_formation_env.core.training_reward`), the velocity action mode, the route
+offset in the observation, collisions that end the episode and a mission corridor. Every view and
+trainer sees it through the scenario (``parallel_env(name, reward="train")``,
+:func:`training_scenario`, the Gymnasium id ``uav_formation_env/FormationTrain-v0``), unpatched.
+
+:data:`LADDER` lists the tasks from easy to the paper's and the distributions; docs/training.md
+documents the reward's terms and the ladder.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from uav_formation_env.config import EpisodeConfig, Scenario
+from uav_formation_env.config_io import resolve_scenario, with_overrides
+
+__all__ = ["LADDER", "TRAINING_PRESET", "evaluation_scenario", "training_scenario"]
+
+# from easy to hard: keep the formation; the paper's route; the paper; the scene distributions
+LADDER: tuple[str, ...] = ("hold", "track", "paper", "random_fields", "random_swarm")
+
+TRAINING_PRESET: dict[str, Any] = {
+    "episode__reward": "train",
+    "episode__action": "velocity",
+    "episode__corridor_width": 150.0,  # [m]: the mission allows 100 m of route error
+    # the first reset spreads the copies over the mission (episode.start), so that every
+    # rollout holds every phase of it, not B copies of the same seconds
+    "episode__start": "staggered",
+    "collision__mode": "terminate",
+    "observation__route_offset": True,
+}
+
+
+def training_scenario(
+    scenario: str | Path | Scenario | Mapping[str, Any] = "paper", **overrides: Any
+) -> Scenario:
+    """A scenario (name, YAML path, mapping or object) under :data:`TRAINING_PRESET`, then
+    ``overrides`` (double-underscore paths, validated like the scenario)."""
+    return with_overrides(resolve_scenario(scenario), {**TRAINING_PRESET, **overrides})
+
+
+def evaluation_scenario(scenario: Scenario) -> Scenario:
+    """``scenario`` as every evaluation flies it: acceleration actions, no corridor, collisions
+    reported without ending the episode, the observation and the world kept. The reward stays
+    the training reward if it is one (unterminated, it scores any policy, the references
+    included, on the same scale), else -J_i. J_i is recorded either way. A policy trained in the
+    velocity mode flies it through
+    :class:`~uav_formation_env.policies.action_modes.VelocitySetpointPolicy`."""
+    episode = EpisodeConfig()
+    if scenario.episode.reward == "train":
+        episode = EpisodeConfig(reward="train", train=scenario.episode.train)
+    return replace(scenario, episode=episode, collision=replace(scenario.collision, mode="none"))
