@@ -57,7 +57,7 @@ def model_path(run: str | Path, best: bool = False) -> Path:
     """The model file of a run directory (``model.zip`` or ``best/model.zip`` of an SB3 run, or
     ``policy.pt`` of the DAgger, BenchMARL and RLlib recipes) or a model file."""
     run = Path(run)
-    if run.is_file():
+    if run.is_file() or (run / "policy.json").is_file():  # a file, or a policy directory
         return run
     if not best and (run / "policy.pt").is_file():
         return run / "policy.pt"

@@ -216,3 +216,52 @@ def training_curves(
     fig.savefig(png, dpi=120)
     plt.close(fig)
     return png
+
+
+def ladder_curves(
+    run_dirs: Sequence[str | Path],
+    png: str | Path,
+    references: dict[str, float] | None = None,
+) -> Path:
+    """Learning curves of the in-process trainer's runs (``progress.csv`` of
+    ``uav_formation_baselines.onpolicy``), one line per run coloured by algorithm.
+
+    Top: the deterministic evaluation's return per UAV under the training reward over
+    agent-steps (left) and over training wall time (right), with ``references`` (name -> the
+    same return of a reference policy on the same task, e.g. LFPIO, the heuristic, random
+    actions) as dashed lines. Bottom: the evaluation's missions completed (fraction), likewise.
+    """
+    import csv
+
+    import yaml
+
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7), sharey="row")
+    colours: dict[str, Any] = {}
+    for run in map(Path, run_dirs):
+        config = yaml.safe_load((run / "config.yaml").read_text()) or {}
+        algorithm = str(config.get("algorithm"))
+        label = None if algorithm in colours else algorithm
+        colour = colours.setdefault(algorithm, f"C{len(colours)}")
+        with open(run / "progress.csv", newline="", encoding="utf-8") as stream:
+            rows = [r for r in csv.DictReader(stream) if r.get("eval_return")]
+        for column, x_key in enumerate(("frames", "wall_s")):
+            xs = [float(r[x_key]) for r in rows]
+            done = [int(r["eval_completed"]) / max(1, int(r["eval_episodes"])) for r in rows]
+            axes[0, column].plot(xs, [float(r["eval_return"]) for r in rows], "-", color=colour,
+                                 label=label)  # fmt: skip
+            axes[1, column].plot(xs, done, "-", color=colour, label=label)
+    for name, value in (references or {}).items():
+        for axis in axes[0]:
+            axis.axhline(value, ls="--", lw=1, color="k" if name == "lfpio" else "0.5",
+                         label=name)  # fmt: skip
+    axes[0, 0].set_ylabel("evaluation return per UAV (reward train)")
+    axes[1, 0].set_ylabel("missions completed (fraction)")
+    for axis in axes[1]:
+        axis.set_ylim(-0.05, 1.05)
+    axes[1, 0].set_xlabel("agent-steps")
+    axes[1, 1].set_xlabel("training wall time [s]")
+    for axis in axes.ravel():
+        axis.grid(alpha=0.3)
+    axes[0, 1].legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, png)

@@ -44,6 +44,7 @@ from uav_formation_baselines.evaluate import (
 )
 from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import mean_ci95, wilson_ci95, write_json
+from uav_formation_env.tasks import evaluation_scenario, training_scenario
 
 __all__ = ["algorithm_rows", "run_record", "main"]
 
@@ -175,6 +176,14 @@ def format_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _header(path: Path) -> list[str]:
+    """The column names of a CSV file ([] if absent)."""
+    if not path.is_file():
+        return []
+    with open(path, encoding="utf-8") as stream:
+        return stream.readline().strip().split(",")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m uav_formation_baselines.results",
@@ -186,6 +195,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed-start", type=int, default=0)
     parser.add_argument("--scenario", default=None, help="default: the first run's")
     parser.add_argument(
+        "--task",
+        default=None,
+        help="a task of the ladder (hold, track, paper, ...): fly it as every evaluation does, "
+        "under the training reward (uav_formation_env.tasks.evaluation_scenario), so that the "
+        "rows get the normalised score (with --compare lfpio random)",
+    )
+    parser.add_argument(
         "--observation",
         choices=("full", "local"),
         default=None,
@@ -194,7 +210,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--compare", nargs="*", default=[REFERENCE], help="reference policies")
     parser.add_argument("--out", default=None, help="output directory")
     args = parser.parse_args(argv)
-    scenario = resolve_scenario(args.scenario) if args.scenario else run_scenario(args.runs[0])
+    if args.task is not None:
+        scenario = evaluation_scenario(training_scenario(args.task))
+    elif args.scenario:
+        scenario = resolve_scenario(args.scenario)
+    else:
+        scenario = run_scenario(args.runs[0])
     if args.observation is not None:
         scenario = with_overrides(scenario, {"observation.kind": args.observation})
     seeds = list(range(args.seed_start, args.seed_start + args.seeds))
@@ -231,10 +252,15 @@ def main(argv: list[str] | None = None) -> int:
             out / "results.json",
         )
         write_json(summaries, out / "summaries.json")
-        from uav_formation_baselines.plots import training_curves
+        from uav_formation_baselines.plots import ladder_curves, training_curves
 
         lfpio = references.get(REFERENCE, {}).get("realised_cost_mean")
-        training_curves(args.runs, out / "learning_curves.png", reference_cost=lfpio)
+        in_process = [r for r in args.runs if "eval_return" in _header(Path(r) / "progress.csv")]
+        if in_process:  # the in-process trainer: returns under the training reward
+            returns = {name: s["return_mean"] for name, s in references.items()}
+            ladder_curves(in_process, out / "learning_curves.png", returns)
+        else:
+            training_curves(args.runs, out / "learning_curves.png", reference_cost=lfpio)
         print(
             f"wrote {out}/results.md, results.csv, results.json, summaries.json, "
             "learning_curves.png"
