@@ -8,8 +8,10 @@ from these):
   :mod:`~uav_formation_env.policies.optimizers`), ``exact`` (the best response solved exactly)
   and ``nash`` (best responses iterated to a Nash equilibrium every step);
 - :data:`SIMPLE_POLICIES`: ``heuristic`` (consensus PD) and ``random``;
-- anything else is the path of a stable-baselines3 model (:class:`~uav_formation_env.policies.
-  learned.SB3Policy`).
+- :data:`SHIPPED_MODELS`: the learned policies installed with the package (one per task, in the
+  format of :mod:`~uav_formation_env.policies.policy_file`, under :data:`MODELS_DIR`);
+- anything else is the path of a policy directory (``policy.json`` + ``policy.npz``) or of a
+  stable-baselines3 model (:class:`~uav_formation_env.policies.learned.SB3Policy`).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.policies.best_response import ExactConfig
-from uav_formation_env.policies.learned import SB3Policy, TorchScriptPolicy
+from uav_formation_env.policies.learned import SB3Policy
 from uav_formation_env.policies.nash import NashConfig
 from uav_formation_env.policies.optimizers.config import (
     OPTIMIZERS,
@@ -30,19 +32,23 @@ from uav_formation_env.policies.optimizers.config import (
     PIOConfig,
     PSOConfig,
 )
+from uav_formation_env.policies.policy_file import FilePolicy, is_policy_dir
 from uav_formation_env.policies.simple import HeuristicPolicy, RandomPolicy
 
 __all__ = [
     "DMPC_OPTIMIZERS",
     "DMPC_SOLVERS",
+    "MODELS_DIR",
     "PAPER_OPTIMIZERS",
     "POLICY_HELP",
     "POLICY_LABELS",
     "POLICY_NAMES",
+    "SHIPPED_MODELS",
     "SIMPLE_POLICIES",
     "BatchPolicy",
     "SolverConfig",
     "make_policy",
+    "model_scenario",
     "solver_config",
 ]
 
@@ -61,6 +67,13 @@ _SIMPLE: dict[str, Callable[[Scenario, int | None], BatchPolicy]] = {
 }
 SIMPLE_POLICIES = tuple(_SIMPLE)  # ("heuristic", "random")
 POLICY_NAMES = (*DMPC_OPTIMIZERS, *SIMPLE_POLICIES)
+MODELS_DIR = Path(__file__).resolve().parents[1] / "models"  # installed as package data
+# name -> what the model is; each directory holds policy.json, policy.npz, scenario.yaml
+SHIPPED_MODELS = {
+    "paper_dagger": "DAgger students of the exact DMPC on the paper scenario",
+    "random_fields_dagger": "DAgger students on random obstacle fields (random_fields)",
+    "random_swarm_dagger": "DAgger students on random swarms of 3-10 UAVs (random_swarm)",
+}
 PAPER_OPTIMIZERS = ("pio", "lfpio")  # the two the paper compares (its Table 2)
 POLICY_LABELS = {
     "pio": "PIO",
@@ -73,9 +86,10 @@ POLICY_LABELS = {
 }
 POLICY_HELP = (
     f"{', '.join(DMPC_OPTIMIZERS)} (the reference DMPC with that solver), "
-    f"{', '.join(SIMPLE_POLICIES)}, a stable-baselines3 model path (.zip; a vecnormalize.pkl "
-    "beside it is applied), or a TorchScript policy (.pt, or a run directory holding policy.pt: "
-    "the RLlib recipe's export)"
+    f"{', '.join(SIMPLE_POLICIES)}, a shipped learned policy ({', '.join(SHIPPED_MODELS)}: "
+    "it flies its own scenario), a policy directory (policy.json + policy.npz, what every "
+    "trainer of the project exports) or a stable-baselines3 model (.zip; obs_stats.npz beside "
+    "it is applied)"
 )
 
 
@@ -100,15 +114,28 @@ def solver_config(optimizer: str | SolverConfig) -> SolverConfig:
     )
 
 
+def model_scenario(name: str) -> Path | None:
+    """The ``scenario.yaml`` a saved model was trained for: a shipped model's, or that of the
+    model's run directory (the directory itself, or the model file's); None if it has none."""
+    if name.lower() in SHIPPED_MODELS:
+        return MODELS_DIR / name.lower() / "scenario.yaml"
+    path = Path(name)
+    for directory in (path, path.parent):
+        if directory.is_dir() and (directory / "scenario.yaml").is_file() and path.exists():
+            return directory / "scenario.yaml"
+    return None
+
+
 def make_policy(
     name: str,
     scenario: Scenario,
     seed: int | None = None,
     algo: str | None = None,
     random: str = "generator",
+    trust_pickle: bool = False,
 ) -> BatchPolicy:
-    """A policy from a name of :data:`POLICY_NAMES` (see the module docstring) or the path of a
-    stable-baselines3 model.
+    """A policy from a name of :data:`POLICY_NAMES` or :data:`SHIPPED_MODELS`, or the path of a
+    policy directory or a stable-baselines3 model (see the module docstring).
 
     Args:
         name: policy name (case-insensitive) or model path.
@@ -119,6 +146,8 @@ def make_policy(
         random: the DMPC optimisers' random numbers, ``"generator"`` (each copy's numpy
             generator) or ``"counter"`` (counter-based, drawn on the observations' device); see
             :class:`~uav_formation_env.policies.dmpc.NashDMPCPolicy`. Other policies ignore it.
+        trust_pickle: let a stable-baselines3 model read a ``vecnormalize.pkl`` (unpickling runs
+            code from the file: only for files you made yourself).
     """
     key = name.lower()
     if key in DMPC_SOLVERS:
@@ -127,20 +156,23 @@ def make_policy(
         return NashDMPCPolicy(scenario, key, seed=seed, random=random)
     if key in _SIMPLE:
         return _SIMPLE[key](scenario, seed)
-    path = Path(name)
-    if path.is_dir() and (path / "policy.pt").is_file():
-        path = path / "policy.pt"  # a run directory of the RLlib recipe
-    if path.suffix == ".pt":
-        exported = TorchScriptPolicy(path)
+    path = MODELS_DIR / key if key in SHIPPED_MODELS else Path(name)
+    if is_policy_dir(path):
+        exported = FilePolicy(path)
         exported.check_scenario(scenario)
         return exported
+    if path.suffix == ".pt" or (path.is_dir() and (path / "policy.pt").is_file()):
+        raise ValueError(
+            f"policy {name!r}: TorchScript files (.pt) are not read (loading them runs code); "
+            "export the policy as a policy directory (policy.json + policy.npz)"
+        )
     if path.is_file() or path.with_suffix(".zip").is_file():
-        policy = SB3Policy(path, algo)
+        policy = SB3Policy(path, algo, trust_pickle=trust_pickle)
         policy.check_scenario(scenario)
         return policy
     if path.suffix == ".zip" or len(path.parts) > 1:
         raise FileNotFoundError(f"policy model file not found: {name!r}")
     raise ValueError(
-        f"unknown policy {name!r}: expected one of {list(POLICY_NAMES)}, the path of a "
-        "stable-baselines3 model (.zip) or of a TorchScript policy (.pt)"
+        f"unknown policy {name!r}: expected one of {[*POLICY_NAMES, *SHIPPED_MODELS]}, a policy "
+        "directory (policy.json + policy.npz) or a stable-baselines3 model (.zip)"
     )
