@@ -200,7 +200,7 @@ class FormationSim:
         self.scenes: list[Scenario] = [scenario] * B  # the concrete scenario of each copy
         disturbance = scenario.disturbance
         if scenario.scene is None:
-            self.offsets = np.asarray(scenario.formation.offsets, dtype=float)  # (N, 6)
+            self.offsets = scenario.formation.slot_offsets  # (N, 6)
             self.base_adjacency = np.asarray(scenario.formation.adjacency, dtype=float)  # (N, N)
             self.obstacles: ObstacleField | None = None  # the scenario's, in every copy
             self.copy_disturbance: CopyDisturbance | None = None
@@ -348,7 +348,7 @@ class FormationSim:
 
     def _set_scene(self, copy: int, scene: Scenario) -> None:
         """Write a drawn scene into copy ``copy``'s per-copy arrays."""
-        self.offsets[copy] = self._put(np.asarray(scene.formation.offsets, dtype=float))
+        self.offsets[copy] = self._put(scene.formation.slot_offsets)
         self.base_adjacency[copy] = self._put(np.asarray(scene.formation.adjacency, dtype=float))
         assert self.obstacles is not None and self.copy_disturbance is not None
         self.obstacles.set_copy(copy, scene.avoidance)
@@ -471,7 +471,6 @@ class FormationSim:
             out.adjacency,
             self.offsets,
             cfg.cost,
-            cfg.formation.mirrored_offsets,
             pair_distance=pair,
             obstacle_surface=obstacle_distance,
         )

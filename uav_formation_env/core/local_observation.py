@@ -385,7 +385,6 @@ def build_local_observations(
     min_separation: Array,
     k: int = 4,
     m: int = 2,
-    mirrored: bool = False,
     next_velocity: Array | None = None,
     time_to_switch: Array | None = None,
     nearest: int = 2,
@@ -414,7 +413,6 @@ def build_local_observations(
         min_separation: (B, N) distance to the nearest other UAV [m].
         k: neighbour slots, >= 0.
         m: obstacle slots, >= 0.
-        mirrored: literal mirrored-offset reading.
         next_velocity: (B, 3) preset velocity of the route's next leg [m/s]; None: each UAV's
             current reference (no change ahead).
         time_to_switch: (B,) time until the next leg starts [s]; None: 0.
@@ -479,7 +477,7 @@ def build_local_observations(
     present = neighbour_index >= 0
     safe = xp.where(present, neighbour_index, 0)
     flat = safe + (xp.arange(batch, device=on) * n_uav)[:, None, None]  # into the (B·N) rows
-    a = anchored(z, offsets, mirrored)  # (B, N, 6)
+    a = anchored(z, offsets)  # (B, N, 6)
     # a view: reshape splits raw's contiguous last axis (on both libraries)
     slots = raw[..., OWN_DIM:end].reshape((batch, n_uav, slots_count, NEIGHBOUR_DIM))
     slots[..., 0] = present

@@ -31,12 +31,12 @@ def formation_rmse(batch: EpisodeBatch) -> np.ndarray:
     """(B,) RMS over steps and UAVs of each UAV's position error from its formation slot [m]."""
     cfg = batch.scenario.formation
     if batch.scenes is None:
-        offsets = np.asarray(cfg.offsets, dtype=float)  # (N, 6)
+        offsets = cfg.slot_offsets  # (N, 6)
     else:  # each seed's drawn formation, (B, N, 6)
-        offsets = np.stack([np.asarray(s.formation.offsets, dtype=float) for s in batch.scenes])
+        offsets = np.stack([s.formation.slot_offsets for s in batch.scenes])
     # anchored() takes (B, N, *extra, 6): seeds first, then UAVs, then the time steps
     z = batch.z.transpose(1, 2, 0, 3)
-    a = anchored(z, offsets if offsets.ndim == 3 else offsets[None], cfg.mirrored_offsets)
+    a = anchored(z, offsets if offsets.ndim == 3 else offsets[None])
     a = a[..., :3].transpose(2, 0, 1, 3)  # (T+1, B, N, 3)
     e = a - a.mean(axis=2, keepdims=True)
     return np.sqrt((e**2).sum(axis=-1).mean(axis=(0, 2)))
