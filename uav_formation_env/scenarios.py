@@ -216,15 +216,12 @@ def shape_formation(
 
 
 # The avoidance rules of the drawn scenarios and the swarms beyond the paper's (docs/scenarios.md):
-# obstacles activate whenever they qualify, also while another is active (random_fields seed 12
-# flew into an obstacle near a turn that waited for the previous one to be restored), a done
-# obstacle activates again when a route turn leads back to it, and between avoidances the
-# reference leads the formation back to its preset route (0.05 1/s, at most 5 m/s: of 0.05, 0.1
-# and 0.2 on random_routes seeds 0-19, 0.05 completed the most missions with the fewest colliding
-# UAV-steps), and within 5 s of a turn an obstacle just past it is judged along the next leg (a
-# 90-degree turn at 20 m/s and 5 m/s^2 per axis takes 4 s; random_fields 68 -> 83 of 100 missions
-# completed, random_swarm 78 -> 82), with sides from each UAV's chord to the next leg there (with
-# the obstacle term: random_fields 92 -> 94, random_routes 83 -> 89, random_swarm 83 -> 87)
+# obstacles activate whenever they qualify, also while another is active (an obstacle near a
+# turn must not wait for the previous one to be restored), a done obstacle activates again when
+# a route turn leads back to it, between avoidances the reference leads the formation back to
+# its preset route (0.05 1/s, at most 5 m/s), and within 5 s of a turn an obstacle just past it
+# is judged along the next leg (a 90-degree turn at 20 m/s and 5 m/s^2 per axis takes 4 s), with
+# sides from each UAV's chord to the next leg there (docs/scenarios.md, "The shipped rules")
 DRAWN_AVOIDANCE = {
     "concurrent": True,
     "rearm": True,
@@ -233,8 +230,7 @@ DRAWN_AVOIDANCE = {
     "turn_preview": 5.0,
 }
 # the drawn scenarios' only (not swarm_N's): a turn ramps over 4 s and an avoiding group keeps
-# the route's pace (at most 1.2 x |v^d|): random_fields 94 -> 96, random_swarm 87 -> 93 of 100
-# (docs/scenarios.md, "Corners and pace")
+# the route's pace (at most 1.2 x |v^d|) (docs/scenarios.md, "The shipped rules")
 DRAWN_CORNERS = {"turn_blend": 4.0, "pace_limit": 1.2}
 # J_i's obstacle clearance term (docs/deviations.md §8): 100 / m² within the 10 m safety margin,
 # over the horizon and 2 s of free flight beyond it (10 steps: the 40 m a UAV needs to stop from
@@ -324,8 +320,7 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
             base.avoidance, obstacles=obstacles, split_graph="base", **DRAWN_AVOIDANCE
         ),
         # no obstacle term (DRAWN_COST): in the 10 m grid, UAVs braking for O1 on their own
-        # (before the topology splits the grid) were run into from behind: swarm_100 seed 0 had
-        # 4 colliding UAV-steps at 10.0 s with it, 0 without (docs/scenarios.md)
+        # (before the topology splits the grid) are run into from behind (docs/scenarios.md)
         # pair terms within 25 m (2.5 spacings, about 20 UAVs of the grid): linear in N
         observation=ObservationConfig(kind="local", sensing_radius=SWARM_SENSING_RADIUS),
     )

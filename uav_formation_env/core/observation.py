@@ -159,7 +159,7 @@ def build_observations(
     """
     # Methods that numpy and torch share (x.reshape(shape), x.ravel(), x.argmin(axis=),
     # x.any(axis=), the flat x.take(index)) rather than the standard's functions: numpy's function
-    # forms dispatch for 1-3 us each, ~20% of this function at B = 1, N = 5 (measured).
+    # forms add a dispatch layer each, a large share of this function at small B.
     xp = namespace_of(z)
     numpy = is_numpy(xp)
     batch, n_uav = z.shape[:2]

@@ -1,80 +1,17 @@
 """Obstacle avoidance with topology reconstruction (docs/model.md §7), batched, on numpy arrays or
 torch tensors (CPU or CUDA; core/array_api.py).
 
-Every function here is pure: it takes arrays with a leading batch axis B (scenario copies) and
-returns new arrays; nothing is stored between calls and nothing is random. Shapes: B copies,
-O obstacles, N UAVs. Geometry (see :mod:`uav_formation_env.core.obstacles`) is horizontal; the
-obstacles are infinite vertical cylinders with safety radius R_s = radius + safety_margin and
-detection radius d^o = radius + detection_margin, both from the centre (40 m and 70 m for the
-paper). ê is the horizontal direction of the preset velocity at the current time, n̂ = ê rotated
-+90°, λ_lon = (p - o)·ê, λ_lat = (p - o)·n̂, D = ||p_xy - o||; "in range" is |λ_lat| < R_s and
-λ_lon < 0.
+Every function here is pure: arrays with a leading batch axis B (scenario copies) in, new arrays
+out; nothing is stored between calls and nothing is random. Per copy, each obstacle goes idle ->
+active -> done (with ``avoidance.rearm`` a done obstacle can activate again). One
+:func:`update_topology` call runs three phases: activation (an obstacle in range of the
+formation activates and fixes every UAV's side), guides and ends (each side's group follows the
+member that needs the largest turn, until none of its members is in range), and outputs (the
+split graph H and the tangent reference v^d of the avoiding UAVs).
 
-Per copy, each obstacle goes idle (0) -> active (1) -> done (2), once (with ``avoidance.rearm``
-a done obstacle activates again, like an idle one, when the rule of phase 1 holds again: after a
-turn of the route the formation can come back into its range). One :func:`update_topology`
-call runs three phases in this order:
-
-1. **Activation.** An idle obstacle is a candidate when at least one UAV is in range and
-   min_i D_i < d^o (both swarm-wide: the UAV in range need not be the nearest one). With
-   ``avoidance.turn_preview`` (T_p > 0), within T_p of a turn of the route the same test is also
-   made along the next leg for the UAVs moved to where they will be at the turn (p + v^d times
-   the time left), and its groups' members are in range while either test holds; any obstacle
-   that activates within that window takes its sides from each UAV's chord to the next leg, so
-   that an obstacle at a corner is passed on the inside of the bend (:func:`_turn_geometry`).
-   At most one obstacle is active per copy: candidates wait while another obstacle is active,
-   and an obstacle restored in this update frees the copy only from the next update on. If
-   several obstacles are candidates at once, the one with the smallest min_i D_i wins (ties:
-   lowest index). With ``avoidance.concurrent`` every candidate activates, whatever else is
-   active (the joint rule of :func:`_avoidance_output`). At activation every UAV gets its side
-   s_i = +1 if λ_lat >= 0 else -1 (λ in the chord's frame within a turn-preview window), fixed
-   until the obstacle is done: +1 passes with the obstacle on the right (clockwise round it).
-   Case 1 (all sides equal): one group. Case 2: Σ+ and Σ-.
-2. **Guides and ends.** Group slot 0 holds side +1, slot 1 side -1 (in case 1 the unused slot is
-   empty). Every update, a group's guide is its in-range member that needs the largest turn
-   towards the group's side to clear the safety circle (the signed angle from ê to the member's
-   own tangent direction; ties: lowest index). This deviates from docs/model.md §7's "innermost,
-   chosen
-   once" (see docs/deviations.md): it reduces to the innermost member for members abreast of
-   each other, but when the V is stretched along the track (heading +y at O2) a member ahead
-   at nearly the same lateral offset needs more turn than the innermost one behind it, and the
-   fixed innermost guide brought that member to 26 m of the centre in the heuristic's runs.
-   A group has ended while none of its members is in range (all abreast or laterally outside the
-   strip, where going straight along ê cannot enter the safety circle); it resumes if a member
-   comes back into range. When every group has ended: status -> done, H <- H0, references <-
-   schedule (``restored`` is True in that update).
-3. **Outputs.** While an obstacle is active: H = complete graph inside each side, no edges across
-   (case 1: the complete graph); ``groups`` = 0 for side +1 and 1 for side -1 in case 2, else 0.
-   Members of a group with a guide that has not ended follow v^d = V_ref·l/||l|| (horizontal,
-   v_z^d = 0), with l the tangent from the guide's current position to the safety circle on the
-   group's side (:func:`~uav_formation_env.core.obstacles.tangent_direction`); they are flagged
-   ``avoiding`` and should hold this reference over the whole MPC horizon (see
-   :func:`reference_preview`). Everyone else follows the preset velocity, but keeps the split
-   adjacency until the restore. V_ref = ||preset velocity|| (``reference_speed="preset"``) or
-   max(||v_guide||, min_reference_speed) (``"current"``); with ``pace_limit`` > 1 it is divided
-   by cos θ (θ the tangent's angle to the preset direction), up to ``pace_limit`` x V_ref, so
-   the group keeps the route point's pace along the route (docs/scenarios.md, "Corners and
-   pace").
-
-Further decisions:
-
-- ê is re-evaluated every update from the schedule, so a preset turn during an active avoidance
-  changes λ_lon (and so the abreast test) but never the sides fixed at activation. If the preset
-  velocity has no horizontal part, ê = 0: no UAV is in range and an active obstacle's guided
-  groups end at once.
-- :func:`preset_velocity` treats t within 1e-9 s of a switching time as equal to it, so that
-  t = k·dt accumulated in floating point switches at the intended step.
-- Only the positions' x, y enter the geometry (z plays no role); the ``"current"`` reference
-  speed uses the guide's full 3-D speed.
-- The returned state never shares memory with the input state. Beyond the fields the API asks
-  for, the state records ``activation_time`` / ``restore_time`` and the output carries
-  ``active_obstacle``.
-- Backends: the state, the inputs and a per-copy :class:`ObstacleField` / :class:`CopySchedules`
-  are all numpy or all torch on one device (``init_topology(..., like=)`` makes a torch state);
-  the configuration's cached numpy arrays (obstacles, schedule) are converted to that device.
-  The fast exits test ``.any()`` on the host (a device sync per step on CUDA). Sums and
-  boolean reductions are spelled as methods (``x.sum(axis=...)``, ``x.any(axis=...)``), which
-  both libraries take: ``np.sum`` and ``np.any`` add ~1 us each to a 26 us B = 1 step.
+The full specification (geometry, tie rules, turn preview, chord sides, pace keeping, backends)
+is docs/reference_policy.md, "Topology reconstruction"; docs/deviations.md says where it departs
+from the paper.
 """
 
 from __future__ import annotations
@@ -240,7 +177,7 @@ def reset_topology(state: TopologyState, mask: Any) -> TopologyState:
 
 
 def _copy_state(state: TopologyState) -> TopologyState:
-    # one type test for the seven fields (the shim's copy() per field: +0.5 us of a 24 us step)
+    # one type test for the seven fields (not the shim's copy() per field)
     clone = np.ndarray.copy if isinstance(state.status, np.ndarray) else copy
     return TopologyState(*(clone(getattr(state, name)) for name in _STATE_FIELDS))
 
@@ -288,7 +225,7 @@ def update_topology(
         The new state and this step's outputs.
     """
     xp = namespace_of(positions)
-    if is_numpy(xp):  # the conversions without the shim's calls: 0.4 us of a 24 us B = 1 step
+    if is_numpy(xp):  # the conversions without the shim's calls
         positions, velocities = np.asarray(positions, dtype=float), np.asarray(velocities, float)
         t, h0 = np.asarray(t, dtype=float), np.asarray(base_adjacency, dtype=float)
     else:
@@ -415,8 +352,8 @@ def update_topology(
     if correction is not None:
         # no route return while an avoidance runs in the copy (the UAVs that are not guided, a
         # group that has passed, would be pulled back towards the obstacle's line) nor while a
-        # UAV is within an obstacle's detection circle (random_routes seed 15: pulled back onto
-        # the route, the formation met the next obstacle too late to turn away)
+        # UAV is within an obstacle's detection circle (pulled back onto the route, a formation
+        # can meet the next obstacle too late to turn away)
         detected = ((min_dist < r_detect_b) & present).any(axis=0)  # (B,)
         busy = (status == ACTIVE).any(axis=0) | detected
         correction = xp.where(busy[:, None], 0.0, correction)
@@ -456,7 +393,7 @@ def _turn_geometry(
     the way the UAV would cut the corner. λ^c = (p - o)·n̂_c, with n̂_c the chord's direction
     rotated +90°, is then used as λ_lat. Judged along either leg alone, an obstacle in the corner
     sends (part of) the formation round the outside of the bend, and it loops back to the next
-    leg 180-230 m behind the route point (`random_swarm` seeds 38, 57, 87; docs/scenarios.md).
+    leg far behind the route point (docs/scenarios.md).
 
     Args:
         avoidance: ``turn_preview`` [s].
@@ -494,8 +431,8 @@ def _turn_geometry(
     length = xp.maximum(xp.sqrt(chord_x**2 + chord_y**2), _CHORD_EPS)
     chord_lat = (now_y * chord_x - now_x * chord_y) / length  # (p - o)·n̂_c
     # an obstacle whose safety circle ends before the turn point is passed on the current leg:
-    # its chord runs along ê, λ^c = λ_lat (random_fields seed 48: O1 45 m before the turn, the
-    # chord to the next leg sent the 80 m wide formation round its inside, 107 m off the route)
+    # its chord runs along ê, λ^c = λ_lat (the chord to the next leg would send a wide
+    # formation round its inside, far off the route)
     to_turn = xp.sqrt(preset[:, 0] ** 2 + preset[:, 1] ** 2) * wait  # (m - p)·ê, (B,) [m]
     before_turn = lon_now + to_turn >= r_safe
     return near, dist, xp.where(before_turn, lat_now, chord_lat), window
@@ -503,7 +440,7 @@ def _turn_geometry(
 
 def _armed(status: Any, rearm: bool) -> Any:
     """Obstacles that may activate: idle ones, and done ones with ``rearm`` (same shape as
-    ``status``, bool). The done test only when rearmed: ~1 us of a 24 us B = 1 step."""
+    ``status``, bool). The done test only when rearmed."""
     armed = status == IDLE
     return armed | (status == DONE) if rearm else armed
 

@@ -77,9 +77,8 @@ class ShieldConfig:
         iterations: dual ascent iterations of a projection.
     """
 
-    # chosen on validation scenes random_fields 1000-1099 flown by the shipped random_fields
-    # student (never the held-out seeds 0-99): completed 94 (unshielded 76), 0 collisions; the
-    # sweep of gains and margins is in docs/shield.md, "Settings"
+    # chosen on validation scenes of random_fields (never the held-out seeds); the sweep of
+    # gains and margins is in docs/shield.md, "Settings"
     obstacle_margin: float = 5.0
     separation_margin: float = 3.0
     gain: float = 0.8

@@ -38,9 +38,9 @@ def difference_paragraphs(
         "we report the mean over seeds with the start positions drawn at random (x ∈ [0, 40] m, "
         "y ∈ [−40, 40] m, docs/model.md §8: the paper does not give them) and the eq. 21 noise "
         "redrawn per seed. The spread between seeds (± above) is the scale on which a single "
-        "run can differ from our mean. A seed's episode also depends on the other seeds of its "
-        "batch: the DMPC's optimisers of all copies draw from one random generator, so seed 0 "
-        "of a 5-seed run is not seed 0 of a 10-seed run (same statistics, different samples)."
+        "run can differ from our mean. A seed's episode does not depend on the other seeds of "
+        "its batch: every copy draws from its own generator, seeded by its episode's seed, so "
+        "seed 0 of a 5-seed run is seed 0 of a 10-seed run (tests/test_seeding.py)."
     )
     for variant in ("pio", "lfpio"):
         if variant not in rows:
