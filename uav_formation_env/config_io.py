@@ -290,3 +290,11 @@ def resolve_scenario(scenario: str | Path | Scenario | Mapping[str, Any] = "pape
         f"unknown scenario {str(scenario)!r}: expected one of {sorted(SCENARIOS)}, "
         "a path to an existing .yaml file, or a Scenario"
     )
+
+
+def resolve_with_overrides(
+    scenario: str | Path | Scenario | Mapping[str, Any], overrides: Mapping[str, Any]
+) -> Scenario:
+    """A scenario from a name / YAML path / mapping / object, with validated field overrides."""
+    resolved = resolve_scenario(scenario)
+    return with_overrides(resolved, overrides) if overrides else resolved

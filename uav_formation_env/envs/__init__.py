@@ -10,18 +10,10 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.config_io import resolve_scenario, with_overrides
+from uav_formation_env.config_io import resolve_with_overrides
 from uav_formation_env.envs.aec import UAVFormationAECEnv
 from uav_formation_env.envs.parallel import UAVFormationParallelEnv
 from uav_formation_env.extras import require
-
-
-def resolve_with_overrides(
-    scenario: str | Path | Scenario | Mapping[str, Any], overrides: Mapping[str, Any]
-) -> Scenario:
-    """A scenario from a name / YAML path / mapping / object, with validated field overrides."""
-    resolved = resolve_scenario(scenario)
-    return with_overrides(resolved, overrides) if overrides else resolved
 
 
 def parallel_env(

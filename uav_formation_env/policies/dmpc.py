@@ -48,7 +48,7 @@ from uav_formation_env.policies.dmpc_step import (
     TriggeredRounds,
     step_solver,
 )
-from uav_formation_env.policies.registry import DMPC_OPTIMIZERS, SolverConfig, solver_config
+from uav_formation_env.policies.solvers import DMPC_OPTIMIZERS, SolverConfig, solver_config
 from uav_formation_env.seeding import check_seed, copy_streams
 
 __all__ = [
@@ -62,7 +62,7 @@ __all__ = [
 
 DEFAULT_THRESHOLD = 10.0  # event-trigger threshold on J_i(W) (docs/model.md §5) [-]
 
-POLICY_OPTIMIZERS = DMPC_OPTIMIZERS  # the solver names NashDMPCPolicy accepts (the registry's)
+POLICY_OPTIMIZERS = DMPC_OPTIMIZERS  # the solver names NashDMPCPolicy accepts
 
 RANDOM_SOURCES = ("generator", "counter")  # NashDMPCPolicy(random=...)
 

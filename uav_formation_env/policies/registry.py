@@ -23,17 +23,15 @@ from typing import Protocol
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.policies.best_response import ExactConfig
 from uav_formation_env.policies.learned import SB3Policy
-from uav_formation_env.policies.nash import NashConfig
-from uav_formation_env.policies.optimizers.config import (
-    OPTIMIZERS,
-    LFPIOConfig,
-    PIOConfig,
-    PSOConfig,
-)
 from uav_formation_env.policies.policy_file import FilePolicy, is_policy_dir
 from uav_formation_env.policies.simple import HeuristicPolicy, RandomPolicy
+from uav_formation_env.policies.solvers import (
+    DMPC_OPTIMIZERS,
+    DMPC_SOLVERS,
+    SolverConfig,
+    solver_config,
+)
 
 __all__ = [
     "DMPC_OPTIMIZERS",
@@ -52,14 +50,6 @@ __all__ = [
     "solver_config",
 ]
 
-SolverConfig = PIOConfig | LFPIOConfig | PSOConfig | ExactConfig | NashConfig
-# name -> the config of NashDMPCPolicy's solver (its defaults)
-DMPC_SOLVERS: dict[str, type[SolverConfig]] = {
-    **OPTIMIZERS,
-    "exact": ExactConfig,
-    "nash": NashConfig,
-}
-DMPC_OPTIMIZERS = tuple(DMPC_SOLVERS)  # ("pio", "lfpio", "pso", "exact", "nash")
 # name -> the policy built from (scenario, seed)
 _SIMPLE: dict[str, Callable[[Scenario, int | None], BatchPolicy]] = {
     "heuristic": lambda scenario, seed: HeuristicPolicy(scenario),
@@ -101,19 +91,6 @@ class BatchPolicy(Protocol):
     def act_batch(self, obs: np.ndarray) -> np.ndarray: ...
 
 
-def solver_config(optimizer: str | SolverConfig) -> SolverConfig:
-    """The solver config of a DMPC solver name (case-insensitive; its defaults), or the config
-    itself."""
-    if isinstance(optimizer, SolverConfig):
-        return optimizer
-    if isinstance(optimizer, str) and optimizer.lower() in DMPC_SOLVERS:
-        return DMPC_SOLVERS[optimizer.lower()]()
-    raise ValueError(
-        f"unknown optimizer {optimizer!r}: expected one of {sorted(DMPC_SOLVERS)} or a config "
-        "object"
-    )
-
-
 def model_scenario(name: str) -> Path | None:
     """The ``scenario.yaml`` a saved model was trained for: a shipped model's, or that of the
     model's run directory (the directory itself, or the model file's); None if it has none."""
@@ -151,7 +128,7 @@ def make_policy(
     """
     key = name.lower()
     if key in DMPC_SOLVERS:
-        from uav_formation_env.policies.dmpc import NashDMPCPolicy  # imports this module
+        from uav_formation_env.policies.dmpc import NashDMPCPolicy  # loads the optimisers
 
         return NashDMPCPolicy(scenario, key, seed=seed, random=random)
     if key in _SIMPLE:
