@@ -25,11 +25,8 @@ and the learner must then use the N-independent observation (``observation.kind:
 The output directory holds the policy (load with ``uav-formation evaluate --policy DIR``),
 ``config.yaml`` (the resolved configuration, scenario name, seed, wall time), ``scenario.yaml``,
 ``rounds.csv`` (per round, written as each ends: samples, loss, validation completion and cost)
-and ``rounds/``. ``--workers`` processes fly each round's episodes
-(:mod:`~uav_formation_baselines.imitation_data`: the same data whatever their number) and the MLP
-is fitted on the GPU when torch sees one (``--device``).
-``--select SEEDS`` chooses a finished run's round again on more validation seeds
-(:func:`select_round`).
+and ``rounds/``. ``--workers`` processes fly each round's episodes (the same data whatever their
+number); ``--select SEEDS`` chooses a finished run's round again (:func:`select_round`).
 """
 
 from __future__ import annotations

@@ -1,11 +1,9 @@
 """A safety shield around any policy: the least change to its actions that keeps every UAV out
 of the obstacles it senses and away from the UAVs in its observation slots.
 
-Learned policies collide where the teacher they imitate does not (``baselines/RESULTS.md``); the
-usual answer in safe control (safety filters, e.g. safe-control-gym's CBF filter) is a filter
-between the policy and the plant. :class:`SafetyShield` is that filter, reading only UAV i's
-local observation (:mod:`~uav_formation_env.core.local_observation`), so it is as decentralised
-as the policy it wraps. Results with a shield are the policy *and* the shield: report them as such.
+:class:`SafetyShield` is a safety filter between the policy and the plant (as safe-control-gym's
+CBF filter), reading only UAV i's local observation, so it is as decentralised as the policy it
+wraps; its results are the policy's *and* the shield's.
 
 **Barriers** (second-order control barrier functions of the double integrator, exponential
 class-K terms with one gain α [1/s]): for a barrier h(p) >= 0 with ``ḣ = ∇h · v``,
@@ -27,10 +25,9 @@ barrier is one half-space ``g · u_n >= β`` per UAV:
 
 **Projection**: where the policy's action meets every barrier it is passed on unchanged;
 elsewhere the shield solves ``min ||x - x_policy||²`` subject to the barriers and the box
-``|u_n| <= u_max - |estimate|`` (the input range the plant leaves while the observer
-compensates, :func:`~uav_formation_env.policies.broadcast.input_half_width`) by projected
-gradient ascent on the dual (accelerated), batched over every UAV that needs it. Where the
-barriers cannot all be met inside the box the answer is the box-limited compromise.
+``|u_n| <= u_max - |estimate|`` (:func:`~uav_formation_env.policies.broadcast.input_half_width`)
+by accelerated projected gradient ascent on the dual, batched over the UAVs that need it (where
+the barriers cannot all be met inside the box: the box-limited compromise).
 """
 
 from __future__ import annotations
