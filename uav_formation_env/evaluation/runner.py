@@ -19,7 +19,7 @@ from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.policies.broadcast import input_half_width
 from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
-from uav_formation_env.policies.registry import BatchPolicy
+from uav_formation_env.policies.protocol import BatchPolicy, as_batch_policy
 from uav_formation_env.scenes import seeds_by_n_uav
 from uav_formation_env.seeding import check_seed
 
@@ -183,10 +183,10 @@ def run_episodes(
         backend=backend,
         device=device,
     )
-    tensors = backend != "numpy" and getattr(policy, "accepts_tensors", False)
+    policy = as_batch_policy(policy)
+    tensors = backend != "numpy" and policy.accepts_tensors
     sim, n_uav = episodes.sim, episodes.n_uav
-    if hasattr(policy, "reset"):
-        policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
+    policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
     start = time.perf_counter()
     step = episodes.reset(seed=seeds)
     result, obs = step.result, step.observation
@@ -205,7 +205,7 @@ def run_episodes(
     callback = progress if callable(progress) else None
     if progress is True:
         bar = tqdm(total=n_steps, desc=desc or policy_name or "episodes", unit="step")
-    links = getattr(policy, "needs_neighbour_index", False)
+    links = policy.needs_neighbour_index
     for k in range(n_steps):
         t0 = time.perf_counter()
         seen = obs if tensors else to_numpy(obs)
@@ -250,12 +250,11 @@ def run_episodes(
         bar.close()
     sim_seconds[0] += sim_seconds_reset
     triggered = j_pre = j_exec = None
-    if hasattr(policy, "records"):
-        records = policy.records()
-        if getattr(records, "triggered", None) is not None and len(records.triggered) == n_steps:
-            triggered = np.asarray(records.triggered, dtype=bool)
-            j_pre = np.asarray(records.j_pre, dtype=float)
-            j_exec = np.asarray(records.j_exec, dtype=float)
+    records = policy.records()
+    if getattr(records, "triggered", None) is not None and len(records.triggered) == n_steps:
+        triggered = np.asarray(records.triggered, dtype=bool)
+        j_pre = np.asarray(records.j_pre, dtype=float)
+        j_exec = np.asarray(records.j_exec, dtype=float)
     u_n, u_applied, disturbance, stage, terms, collision = zip(*steps)
     gap_arrays = [np.stack(a) for a in zip(*gaps)] if gaps else [None, None, None]
     topo = sim.topology
@@ -329,7 +328,7 @@ def policy_plans(
     Returns:
         (B, N, H, 3) [m/s^2].
     """
-    plans = getattr(policy, "plans", None)
+    plans = as_batch_policy(policy).plans
     if isinstance(plans, np.ndarray) and plans.shape[:2] == actions.shape[:2]:
         return plans
     u_max, horizon = scenario.dynamics.u_max, scenario.cost.horizon

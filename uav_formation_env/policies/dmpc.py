@@ -48,6 +48,7 @@ from uav_formation_env.policies.dmpc_step import (
     TriggeredRounds,
     step_solver,
 )
+from uav_formation_env.policies.protocol import PolicyBase
 from uav_formation_env.policies.solvers import DMPC_OPTIMIZERS, SolverConfig, solver_config
 from uav_formation_env.seeding import check_seed, copy_streams
 
@@ -67,7 +68,7 @@ POLICY_OPTIMIZERS = DMPC_OPTIMIZERS  # the solver names NashDMPCPolicy accepts
 RANDOM_SOURCES = ("generator", "counter")  # NashDMPCPolicy(random=...)
 
 
-class NashDMPCPolicy:
+class NashDMPCPolicy(PolicyBase):
     """Distributed MPC in which every UAV best-responds to its neighbours' broadcast plans.
 
     Acts from observations only (see the module docstring). ``act_batch`` is the core API; ``act``

@@ -23,6 +23,7 @@ import numpy as np
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.local_observation import observation_size
 from uav_formation_env.extras import require
+from uav_formation_env.policies.protocol import PolicyBase
 
 __all__ = [
     "NORMALIZER_PICKLE",
@@ -141,7 +142,7 @@ def safe_custom_objects(path: str | Path, algo_class: type) -> dict[str, Any]:
     return objects
 
 
-class SB3Policy:
+class SB3Policy(PolicyBase):
     """A saved stable-baselines3 model shared by every UAV (parameter sharing).
 
     The algorithm is ``algo`` or, if None, the first of :data:`SB3_ALGORITHMS` that loads the file

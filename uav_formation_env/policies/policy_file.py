@@ -21,6 +21,7 @@ import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.local_observation import observation_size
+from uav_formation_env.policies.protocol import PolicyBase
 
 __all__ = [
     "ACTIONS",
@@ -214,7 +215,7 @@ def load_policy_file(directory: str | Path) -> FilePolicy:
     return FilePolicy(directory)
 
 
-class FilePolicy:
+class FilePolicy(PolicyBase):
     """A policy of the v1 file format, shared by every UAV: ``act_batch`` maps (B, N, dim)
     observations to (B, N, 3) actions in [-1, 1], in float64 numpy.
 

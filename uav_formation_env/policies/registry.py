@@ -18,13 +18,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Protocol
-
-import numpy as np
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.policies.learned import SB3Policy
 from uav_formation_env.policies.policy_file import FilePolicy, is_policy_dir
+from uav_formation_env.policies.protocol import BatchPolicy
 from uav_formation_env.policies.simple import HeuristicPolicy, RandomPolicy
 from uav_formation_env.policies.solvers import (
     DMPC_OPTIMIZERS,
@@ -81,14 +79,6 @@ POLICY_HELP = (
     "trainer of the project exports) or a stable-baselines3 model (.zip; obs_stats.npz beside "
     "it is applied)"
 )
-
-
-class BatchPolicy(Protocol):
-    """What :func:`~uav_formation_env.evaluation.run_episodes` needs of a policy
-    (``reset(batch_size, seeds)`` optional; a policy with ``needs_neighbour_index = True`` is
-    called as ``act_batch(obs, neighbour_index)`` with the local layout's slot index)."""
-
-    def act_batch(self, obs: np.ndarray) -> np.ndarray: ...
 
 
 def model_scenario(name: str) -> Path | None:

@@ -45,6 +45,7 @@ from uav_formation_env.core.local_observation import (
     slot_frame,
 )
 from uav_formation_env.policies.broadcast import input_half_width
+from uav_formation_env.policies.protocol import PolicyBase, as_batch_policy
 
 __all__ = ["SafetyShield", "ShieldConfig", "barrier_halfspaces", "project_onto_halfspaces"]
 
@@ -208,7 +209,7 @@ def project_onto_halfspaces(
     return np.clip(x0 + np.einsum("mk,mkc->mc", multiplier, normal), -half_width, half_width)
 
 
-class SafetyShield:
+class SafetyShield(PolicyBase):
     """``policy`` with a safety shield between it and the plant (module docstring).
 
     Acts like the wrapped policy (same ``reset``, ``needs_neighbour_index`` and ``records``)
@@ -232,23 +233,22 @@ class SafetyShield:
             )
         if config is not None and not isinstance(config, ShieldConfig):
             raise ValueError(f"config must be a ShieldConfig or None, got {type(config).__name__}")
-        self.policy = policy
+        self.policy = as_batch_policy(policy)
         self.scenario = scenario
         self.config = config or ShieldConfig()
-        self.needs_neighbour_index = bool(getattr(policy, "needs_neighbour_index", False))
+        self.needs_neighbour_index = self.policy.needs_neighbour_index
         self.uav_steps = 0
         self.interventions = 0
 
     def reset(self, batch_size: int = 1, seeds: Sequence[int | None] | None = None) -> None:
         """Reset the wrapped policy (if it has state) and the intervention counts."""
-        if hasattr(self.policy, "reset"):
-            self.policy.reset(batch_size, seeds=seeds)
+        self.policy.reset(batch_size, seeds=seeds)
         self.uav_steps = 0
         self.interventions = 0
 
     def records(self) -> Any:
         """The wrapped policy's records (the DMPC's event triggers), if it keeps any."""
-        return self.policy.records() if hasattr(self.policy, "records") else None
+        return self.policy.records()
 
     @property
     def intervention_rate(self) -> float:

@@ -20,12 +20,13 @@ from uav_formation_env.core.observation import (
     require_decodable,
 )
 from uav_formation_env.policies.heuristic import ConsensusGains, consensus_pd
+from uav_formation_env.policies.protocol import PolicyBase
 from uav_formation_env.seeding import check_seed, copy_streams
 
 __all__ = ["HeuristicPolicy", "RandomPolicy"]
 
 
-class RandomPolicy:
+class RandomPolicy(PolicyBase):
     """Uniform random normalised actions in [-1, 1]^3 (a lower bound on any controller).
 
     One stream per copy, seeded from the episode seeds given to :meth:`reset` (see
@@ -51,7 +52,7 @@ class RandomPolicy:
         return np.stack([g.uniform(-1.0, 1.0, size=(n_uav, 3)) for g in self._rngs])
 
 
-class HeuristicPolicy:
+class HeuristicPolicy(PolicyBase):
     """The consensus PD controller (:func:`~uav_formation_env.policies.heuristic.consensus_pd`)
     acting from observations only.
 
