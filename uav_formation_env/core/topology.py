@@ -225,25 +225,11 @@ def update_topology(
         The new state and this step's outputs.
     """
     xp = namespace_of(positions)
-    if is_numpy(xp):  # the conversions without the shim's calls
-        positions, velocities = np.asarray(positions, dtype=float), np.asarray(velocities, float)
-        t, h0 = np.asarray(t, dtype=float), np.asarray(base_adjacency, dtype=float)
-    else:
-        positions = as_float(positions)
-        velocities, t = as_float(velocities, like=positions), as_float(t, like=positions)
-        h0 = as_float(base_adjacency, like=positions)
+    positions, velocities, t, h0 = _checked_inputs(
+        xp, state, positions, velocities, t, base_adjacency, avoidance, obstacles
+    )
     batch, n_uav = positions.shape[:2]
     n_obs = state.status.shape[1]
-    if state.side.shape != (batch, n_obs, n_uav) or velocities.shape != positions.shape:
-        raise ValueError(
-            f"shape mismatch: state side {tuple(state.side.shape)}, positions "
-            f"{tuple(positions.shape)}, velocities {tuple(velocities.shape)}"
-        )
-    n_config = len(avoidance.obstacles) if obstacles is None else obstacles.count
-    if n_obs != n_config:
-        raise ValueError(f"state has {n_obs} obstacles, the obstacle field has {n_config}")
-    if t.shape != (batch,):
-        t = xp.broadcast_to(t, (batch,))
     preset = preset_velocity(schedule, t)  # (B, 3): the track frame and the turn window
     # the reference outside an avoidance: the preset velocity, its corners blended, plus the
     # route return
@@ -254,17 +240,8 @@ def update_topology(
     if n_obs == 0:
         return state, _idle_output(xp, base, h0, batch, n_uav, n_obs, correction)
 
-    if obstacles is None:  # one field for every copy: (O,) radii broadcast as (O, 1, 1)
-        centres, r_safe, r_detect = obstacle_arrays(avoidance)
-        r_detect_sq, present = detection_sq(avoidance), True
-        if not is_numpy(xp):  # the cached numpy constants on the positions' device
-            fixed = (centres, r_safe, r_detect, r_detect_sq)
-            centres, r_safe, r_detect, r_detect_sq = (constant_like(c, positions) for c in fixed)
-        fast_centres, r_safe_b, r_detect_b = centres, r_safe[:, None, None], r_detect[:, None]
-    else:  # per copy: batch-last (O, 1, B) and (O, B)
-        centres, r_detect_sq = obstacles.centres, obstacles.r_detect**2
-        fast_centres, present = centres[:, None], obstacles.present.T
-        r_safe_b, r_detect_b = obstacles.r_safe.T[:, None, :], obstacles.r_detect.T
+    field = _field_arrays(xp, avoidance, obstacles, positions)
+    centres, r_safe, r_detect_sq, present, fast_centres, r_safe_b, r_detect_b = field
     turn = _turn_geometry(avoidance, schedule, t, positions, preset, centres, r_safe_b)
     if turn is None and not (state.status == ACTIVE).any():
         # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
@@ -283,7 +260,6 @@ def update_topology(
     near = in_range(lon, lat, r_safe_b)
     if turn is not None:  # in range along the next leg, from the positions at the turn
         near_turn, dist_turn, chord_lat, window = turn
-    slot_sides = constant_like(_SLOT_SIDES, positions)
 
     status = move_batch_last(state.status)  # (O, B), modified in place below
     side = move_batch_last(state.side)  # (O, N, B)
@@ -293,24 +269,15 @@ def update_topology(
     activation_time = move_batch_last(state.activation_time)
     restore_time = move_batch_last(state.restore_time)
 
-    # 1. activation: every candidate when concurrent; else at most one active obstacle per copy,
-    # the nearest candidate wins
+    # 1. activation
     min_dist = amin(dist, axis=1)  # (O, B)
-    armed = _armed(status, avoidance.rearm)  # (O, B)
     candidate = near.any(axis=1) & (min_dist < r_detect_b)
     side_lat = lat
     if turn is not None:  # also met along the next leg; near a turn, sides from the chords
         by_turn = near_turn.any(axis=1) & (amin(dist_turn, axis=1) < r_detect_b)
         candidate = candidate | by_turn
         side_lat = xp.where(window, chord_lat, lat)
-    candidate = candidate & armed & present
-    if avoidance.concurrent:
-        activated = candidate
-    else:
-        candidate &= ~(status == ACTIVE).any(axis=0)  # a busy copy waits
-        chosen = _first_argmin(xp.where(candidate, min_dist, math.inf), axis=0)  # (B,)
-        obs_index = xp.arange(n_obs, device=device(positions))[:, None]
-        activated = candidate & (obs_index == chosen)  # (O, B)
+    activated = _activated(xp, candidate & present, status, min_dist, avoidance, positions)
     if activated.any():
         new_side, one_group = choose_sides(side_lat, avoidance.split_deadband)
         side = xp.where(activated[:, None], new_side, side)
@@ -320,21 +287,13 @@ def update_topology(
         activation_time = xp.where(activated, t, activation_time)
         status[activated] = ACTIVE
 
-    # 2. guides (re-chosen every step: the in-range member needing the largest deflection) and
-    # ends (no member left in range)
+    # 2. guides and ends
     active = status == ACTIVE  # (O, B)
     if active.any():
-        member = side[:, None] == slot_sides[:, None, None]  # (O, 2, N, B)
-        # in range along the current leg or, near a turn, along the next one; every member's
-        # turn is measured from the current heading (one frame: measured from different
-        # headings, the turns of two members are not comparable)
-        eligible = member & (near if turn is None else near | near_turn)[:, None]
-        r_safe_d = r_safe if obstacles is None else r_safe_b
-        demand = deflection_demand(rel_x, rel_y, dist, r_safe_d, e_hat, slot_sides)  # (O,2,N,B)
-        best = _first_argmin(xp.where(eligible, -demand, math.inf), axis=2)  # (O, 2, B)
-        has_guide = eligible.any(axis=2)
-        guide = xp.where(active[:, None], xp.where(has_guide, best, -1), guide)
-        ended = xp.where(active[:, None], ~has_guide, ended)
+        # in range along the current leg or, near a turn, along the next one
+        eligible = near if turn is None else near | near_turn
+        geometry = (rel_x, rel_y, dist, r_safe if obstacles is None else r_safe_b, e_hat)
+        guide, ended = _guides_and_ends(xp, active, side, eligible, geometry, guide, ended)
     restored = active & ended.all(axis=1)  # (O, B)
     if restored.any():
         status[restored] = DONE
@@ -368,6 +327,113 @@ def update_topology(
             output, active, side, guide, ended, case, geometry, velocities, preset, avoidance
         )
     return new_state, output
+
+
+def _checked_inputs(
+    xp: Any,
+    state: TopologyState,
+    positions: Any,
+    velocities: Any,
+    t: Any,
+    base_adjacency: Any,
+    avoidance: AvoidanceConfig,
+    obstacles: ObstacleField | None,
+) -> tuple[Any, Any, Any, Any]:
+    """(positions, velocities, t (B,), H0) as float arrays of ``xp``; a ``ValueError`` naming
+    the shapes that do not fit ``state``."""
+    if is_numpy(xp):  # the conversions without the shim's calls
+        positions, velocities = np.asarray(positions, dtype=float), np.asarray(velocities, float)
+        t, h0 = np.asarray(t, dtype=float), np.asarray(base_adjacency, dtype=float)
+    else:
+        positions = as_float(positions)
+        velocities, t = as_float(velocities, like=positions), as_float(t, like=positions)
+        h0 = as_float(base_adjacency, like=positions)
+    batch, n_uav = positions.shape[:2]
+    n_obs = state.status.shape[1]
+    if state.side.shape != (batch, n_obs, n_uav) or velocities.shape != positions.shape:
+        raise ValueError(
+            f"shape mismatch: state side {tuple(state.side.shape)}, positions "
+            f"{tuple(positions.shape)}, velocities {tuple(velocities.shape)}"
+        )
+    n_config = len(avoidance.obstacles) if obstacles is None else obstacles.count
+    if n_obs != n_config:
+        raise ValueError(f"state has {n_obs} obstacles, the obstacle field has {n_config}")
+    if t.shape != (batch,):
+        t = xp.broadcast_to(t, (batch,))
+    return positions, velocities, t, h0
+
+
+def _field_arrays(
+    xp: Any, avoidance: AvoidanceConfig, obstacles: ObstacleField | None, positions: Any
+) -> tuple[Any, ...]:
+    """(centres, r_safe, r_detect², present, centres for the fast exit, r_safe and r_detect
+    batch-last): one field for every copy ((O,) radii broadcast as (O, 1, 1)) or per copy
+    ((O, 1, B) and (O, B))."""
+    if obstacles is None:
+        centres, r_safe, r_detect = obstacle_arrays(avoidance)
+        r_detect_sq, present = detection_sq(avoidance), True
+        if not is_numpy(xp):  # the cached numpy constants on the positions' device
+            fixed = (centres, r_safe, r_detect, r_detect_sq)
+            centres, r_safe, r_detect, r_detect_sq = (constant_like(c, positions) for c in fixed)
+        return (
+            centres,
+            r_safe,
+            r_detect_sq,
+            present,
+            centres,
+            r_safe[:, None, None],
+            r_detect[:, None],
+        )
+    centres, r_detect_sq = obstacles.centres, obstacles.r_detect**2
+    r_safe_b = obstacles.r_safe.T[:, None, :]
+    return (
+        centres,
+        None,
+        r_detect_sq,
+        obstacles.present.T,
+        centres[:, None],
+        r_safe_b,
+        obstacles.r_detect.T,
+    )
+
+
+def _activated(
+    xp: Any, candidate: Any, status: Any, min_dist: Any, avoidance: AvoidanceConfig, like: Any
+) -> Any:
+    """(O, B) the obstacles that activate: every armed candidate when ``concurrent``; else at
+    most one per copy, none in a busy copy, the nearest candidate (ties: lowest index)."""
+    candidate = candidate & _armed(status, avoidance.rearm)
+    if avoidance.concurrent:
+        return candidate
+    candidate &= ~(status == ACTIVE).any(axis=0)  # a busy copy waits
+    chosen = _first_argmin(xp.where(candidate, min_dist, math.inf), axis=0)  # (B,)
+    obs_index = xp.arange(status.shape[0], device=device(like))[:, None]
+    return candidate & (obs_index == chosen)  # (O, B)
+
+
+def _guides_and_ends(
+    xp: Any,
+    active: Any,
+    side: Any,
+    eligible: Any,
+    geometry: tuple[Any, ...],
+    guide: Any,
+    ended: Any,
+) -> tuple[Any, Any]:
+    """Each active obstacle's group guides, re-chosen every step: the eligible (in-range)
+    member needing the largest deflection; a group without one has ended. (O, 2, B) each.
+    Every member's turn is measured from the current heading (one frame: measured from
+    different headings, the turns of two members are not comparable)."""
+    rel_x, rel_y, dist, r_safe, e_hat = geometry
+    slot_sides = constant_like(_SLOT_SIDES, dist)
+    member = side[:, None] == slot_sides[:, None, None]  # (O, 2, N, B)
+    eligible = member & eligible[:, None]
+    demand = deflection_demand(rel_x, rel_y, dist, r_safe, e_hat, slot_sides)  # (O, 2, N, B)
+    best = _first_argmin(xp.where(eligible, -demand, math.inf), axis=2)  # (O, 2, B)
+    has_guide = eligible.any(axis=2)
+    guide = xp.where(active[:, None], xp.where(has_guide, best, -1), guide)
+    ended = xp.where(active[:, None], ~has_guide, ended)
+    return guide, ended
 
 
 def _turn_geometry(
