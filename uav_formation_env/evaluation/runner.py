@@ -195,8 +195,8 @@ def run_episodes(
         distance = to_numpy(obstacle_distances(z[..., :3], sim.field))
         return distance.min(axis=1, initial=np.inf)
 
-    states = [_state_record(result, centre_min)]
-    steps: list[tuple] = []
+    recorder = _Recorder(centre_min)
+    recorder.state(result)
     policy_seconds = np.zeros(n_steps)
     sim_seconds = np.zeros(n_steps)
     gaps: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -231,17 +231,8 @@ def run_episodes(
         result, obs = step.result, step.observation
         policy_seconds[k] = t1 - t0
         sim_seconds[k] = time.perf_counter() - t_sim
-        states.append(_state_record(result, centre_min))
-        steps.append(
-            (
-                to_numpy(result.u_n),
-                to_numpy(result.u_applied),
-                to_numpy(result.disturbance),
-                to_numpy(result.cost.total),
-                {name: to_numpy(v) for name, v in result.cost.as_dict().items()},
-                to_numpy(result.collision),
-            )
-        )
+        recorder.state(result)
+        recorder.step(result)
         if bar is not None:
             bar.update(1)
         elif callback is not None:
@@ -255,7 +246,6 @@ def run_episodes(
         triggered = np.asarray(records.triggered, dtype=bool)
         j_pre = np.asarray(records.j_pre, dtype=float)
         j_exec = np.asarray(records.j_exec, dtype=float)
-    u_n, u_applied, disturbance, stage, terms, collision = zip(*steps)
     gap_arrays = [np.stack(a) for a in zip(*gaps)] if gaps else [None, None, None]
     topo = sim.topology
     return EpisodeBatch(
@@ -263,19 +253,7 @@ def run_episodes(
         seeds=seeds,
         policy_name=policy_name,
         t=np.arange(n_steps + 1) * scenario.dynamics.dt,
-        z=np.stack([s[0] for s in states]),
-        reference_velocity=np.stack([s[1] for s in states]),
-        estimate=np.stack([s[2] for s in states]),
-        groups=np.stack([s[3] for s in states]),
-        min_separation=np.stack([s[4] for s in states]),
-        obstacle_surface=np.stack([s[5] for s in states]),
-        obstacle_center=np.stack([s[6] for s in states]),
-        u_n=np.stack(u_n),
-        u_applied=np.stack(u_applied),
-        disturbance=np.stack(disturbance),
-        stage_cost=np.stack(stage),
-        cost_terms={name: np.stack([t[name] for t in terms]) for name in terms[0]},
-        collision=np.stack(collision),
+        **recorder.arrays(),
         activation_time=np.array(to_numpy(topo.activation_time), dtype=float),
         restore_time=np.array(to_numpy(topo.restore_time), dtype=float),
         case=np.array(to_numpy(topo.case), dtype=int),
@@ -335,6 +313,51 @@ def policy_plans(
     half_width = input_half_width(decode_observations(obs, scenario.n_uav).estimate, u_max)
     held = np.clip(np.clip(actions, -1.0, 1.0) * u_max, -half_width, half_width)
     return np.repeat(held[:, :, None, :], horizon, axis=2)
+
+
+class _Recorder:
+    """The per-step records of an episode batch, on the host: the state after the reset and
+    after every step, and every step's inputs, disturbance, cost and collisions."""
+
+    def __init__(self, centre_min: Any) -> None:
+        self.centre_min = centre_min
+        self.states: list[tuple[np.ndarray, ...]] = []
+        self.steps: list[tuple] = []
+
+    def state(self, result: Any) -> None:
+        self.states.append(_state_record(result, self.centre_min))
+
+    def step(self, result: Any) -> None:
+        self.steps.append(
+            (
+                to_numpy(result.u_n),
+                to_numpy(result.u_applied),
+                to_numpy(result.disturbance),
+                to_numpy(result.cost.total),
+                {name: to_numpy(v) for name, v in result.cost.as_dict().items()},
+                to_numpy(result.collision),
+            )
+        )
+
+    def arrays(self) -> dict[str, Any]:
+        """The :class:`EpisodeBatch` fields of the records, stacked along time."""
+        states = self.states
+        u_n, u_applied, disturbance, stage, terms, collision = zip(*self.steps)
+        return {
+            "z": np.stack([s[0] for s in states]),
+            "reference_velocity": np.stack([s[1] for s in states]),
+            "estimate": np.stack([s[2] for s in states]),
+            "groups": np.stack([s[3] for s in states]),
+            "min_separation": np.stack([s[4] for s in states]),
+            "obstacle_surface": np.stack([s[5] for s in states]),
+            "obstacle_center": np.stack([s[6] for s in states]),
+            "u_n": np.stack(u_n),
+            "u_applied": np.stack(u_applied),
+            "disturbance": np.stack(disturbance),
+            "stage_cost": np.stack(stage),
+            "cost_terms": {name: np.stack([t[name] for t in terms]) for name in terms[0]},
+            "collision": np.stack(collision),
+        }
 
 
 def _state_record(result, centre_min) -> tuple[np.ndarray, ...]:
