@@ -133,6 +133,9 @@ def safe_custom_objects(path: str | Path, algo_class: type) -> dict[str, Any]:
                         f"({value[:60]!r}); it cannot be loaded without unpickling"
                     )
             objects[key] = kwargs
+        elif key == "train_freq":  # off-policy training only; loading needs a valid value
+            aliases = require("stable_baselines3.common.type_aliases", "a stable-baselines3 model")
+            objects[key] = aliases.TrainFreq(1, aliases.TrainFrequencyUnit.STEP)
         elif "value_schedule" in item:  # lr_schedule, clip_range: a constant is all predict needs
             found = re.search(r"val=([-+0-9.eE]+)", str(item["value_schedule"]))
             value = float(found.group(1)) if found else 0.0
