@@ -22,7 +22,6 @@ from __future__ import annotations
 from pathlib import Path
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
-MODELS_DIR = Path(__file__).parent / "models"
 ALGOS = ("ppo", "sac")
 
-__all__ = ["ALGOS", "HYPERPARAMS_DIR", "MODELS_DIR"]
+__all__ = ["ALGOS", "HYPERPARAMS_DIR"]

@@ -13,26 +13,10 @@ numeric infos (cost terms, neighbours, ...) under ``("uav", "info")``.
 The task's config (:class:`UavFormationTaskConfig`) puts the scenario under the training preset
 by default (``reward="train"``: :data:`uav_formation_env.tasks.TRAINING_PRESET`, docs/training.md),
 the same task the project's own trainer sees; ``reward="paper"`` keeps -J_i, whose per-episode
-returns are -2e11..-4e12::
-
-    from benchmarl.algorithms import MappoConfig
-    from benchmarl.experiment import Experiment, ExperimentConfig
-    from benchmarl.models.mlp import MlpConfig
-    from uav_formation_baselines.benchmarl_task import UavFormationTask
-
-    experiment = Experiment(
-        task=UavFormationTask.PAPER.get_task(),  # or .get_task({"duration": 40.0, ...})
-        algorithm_config=MappoConfig.get_from_yaml(),
-        model_config=MlpConfig.get_from_yaml(),
-        critic_model_config=MlpConfig.get_from_yaml(),
-        seed=0,
-        config=ExperimentConfig.get_from_yaml(),
-    )
-    experiment.run()
-
-BenchMARL's hydra command line (``python benchmarl/run.py task=...``) only knows the tasks whose
-YAML ships inside benchmarl; use the Python API above (``examples/benchmarl_mappo.py`` is a
-runnable script). Needs the ``[benchmarl]`` extra (benchmarl, torchrl, torch).
+returns are -2e11..-4e12. Use BenchMARL's Python API with
+``task=UavFormationTask.PAPER.get_task()`` (``examples/benchmarl_mappo.py`` is a runnable script;
+its hydra command line only knows the tasks that ship inside benchmarl). Needs the
+``[benchmarl]`` extra (benchmarl, torchrl, torch).
 
 ``backend="torch"`` (a task option) skips PettingZoo: the task's env is then the batched
 :class:`~uav_formation_env.envs.torchrl_adapter.FormationTorchRLEnv` of ``num_envs`` copies on

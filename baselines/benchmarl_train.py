@@ -10,9 +10,9 @@ numpy). Settings live in ``baselines/hyperparams/benchmarl.yml``: a ``default`` 
 per algorithm over it, ``--set`` last; unknown keys are errors naming the key. Every UAV shares
 one actor (BenchMARL's ``share_policy_params``), so the trained actor flies any copy.
 
-The output directory holds ``policy.pt`` (the actor as TorchScript: observations to the mean
-action ``tanh(loc)`` of BenchMARL's TanhNormal, which is its deterministic action, and the log
-of its scale; load with ``uav-formation evaluate --policy DIR``), ``config.yaml`` (settings, seed,
+The output directory holds the actor as a policy file (``policy.json`` + ``policy.npz``: the
+mean action ``tanh(loc)`` of BenchMARL's TanhNormal, which is its deterministic action; load with
+``uav-formation evaluate --policy DIR``), ``config.yaml`` (settings, seed,
 frames, wall time), ``scenario.yaml``, ``progress.csv`` (per iteration: frames, mean episode
 reward, seconds) and BenchMARL's own experiment folder ``benchmarl/``.
 """
@@ -229,10 +229,14 @@ def actor_module(experiment: Any) -> TanhNormalActor:
     return TanhNormalActor(net, copy.deepcopy(extractors[0].scale_mapping).cpu()).eval()
 
 
-def export_actor(experiment: Any, path: str | Path, sample: np.ndarray) -> Path:
-    """Save the experiment's shared actor as a TorchScript ``policy.pt`` (checked on
-    ``sample`` (M, dim) observations)."""
-    return save_policy(actor_module(experiment), path, sample)
+def export_actor(
+    experiment: Any, path: str | Path, sample: np.ndarray, observation: str = "full"
+) -> Path:
+    """Save the experiment's shared actor as a policy file in directory ``path`` (checked on
+    ``sample`` (M, dim) observations): its MLP's ``loc`` outputs, squashed by tanh."""
+    return save_policy(
+        actor_module(experiment).net, path, sample, observation=observation, action="tanh"
+    )
 
 
 def train_benchmarl(
@@ -282,7 +286,7 @@ def train_benchmarl(
 
     sample = FormationEpisodes(scen, 2).reset(seed=[0, 1]).observation
     sample = sample.reshape(-1, sample.shape[-1])
-    export_actor(experiment, out / "policy.pt", sample)
+    export_actor(experiment, out, sample, scen.observation.kind)
     with open(out / "progress.csv", "w", newline="", encoding="utf-8") as stream:
         writer = csv.DictWriter(
             stream, fieldnames=["iteration", "frames", "mean_reward_per_uav_step", "seconds"]
@@ -336,7 +340,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, KeyError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(f"wrote {args.out}/policy.pt: {record['frames']} frames in {record['wall_time_s']:.0f} s")
+    print(
+        f"wrote the policy {args.out}: {record['frames']} frames in {record['wall_time_s']:.0f} s"
+    )
     report_run(args.out, args.heldout_seeds, training_reward=record["final_reward_per_uav_step"])
     return 0
 

@@ -1,8 +1,10 @@
 """Training callbacks: periodic evaluation with the package's runner, and checkpoints.
 
-Every saved model goes into a directory of its own together with the ``vecnormalize.pkl`` of the
-same moment, because :class:`uav_formation_env.evaluation.SB3Policy` normalises a model's
-observations with the statistics file beside it: ``best/model.zip``, ``checkpoints/<steps>/``.
+Every saved model goes into a directory of its own together with the observation statistics of
+the same moment, because :class:`uav_formation_env.evaluation.SB3Policy` normalises a model's
+observations with the statistics beside it: ``best/model.zip``, ``checkpoints/<steps>/``. They
+are written twice: ``obs_stats.npz`` (plain arrays, what the evaluation reads) and SB3's
+``vecnormalize.pkl`` (a pickle, to resume training with ``VecNormalize.load``).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.evaluation import SB3Policy, run_episodes, summarise
+from uav_formation_env.policies.learned import OBS_STATS_FILE, ObsStats
 
 EVAL_KEYS = (
     "realised_cost_mean",
@@ -36,13 +39,17 @@ def live_policy(model: BaseAlgorithm) -> SB3Policy:
 
 
 def save_run(model: BaseAlgorithm, directory: Path, name: str = "model") -> Path:
-    """Save ``model`` as ``directory/name.zip`` and its VecNormalize beside it."""
+    """Save ``model`` as ``directory/name.zip`` and its VecNormalize beside it (as
+    ``obs_stats.npz`` and ``vecnormalize.pkl``)."""
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{name}.zip"
     model.save(path)
     normalizer = model.get_vec_normalize_env()
     if normalizer is not None:
         normalizer.save(str(directory / NORMALIZER_FILE))
+        stats = ObsStats.of(normalizer)
+        if stats is not None:
+            stats.save(directory / OBS_STATS_FILE)
     return path
 
 

@@ -1,20 +1,19 @@
-"""An ensemble of learned policies: one TorchScript ``policy.pt`` whose action is its members' mean.
+"""An ensemble of learned policies: one policy file whose action is its members' mean.
 
     python -m uav_formation_baselines.ensemble --out runs/dagger_paper_ensemble \
         runs/dagger_paperG_s3 runs/dagger_paperG_s4 ... [--top 4]
 
-Each member is a finished run of the same scenario and observation layout (its ``policy.pt``,
+Each member is a finished run of the same scenario and observation layout (its policy,
 ``scenario.yaml`` and ``config.yaml``). ``--top K`` keeps the K members whose chosen rounds scored
 best on their validation seeds (:func:`validation_score`: the 40-seed scores of ``--select 40``
 where the run has them, else training's own; ranked like
 :func:`~uav_formation_baselines.imitation.best_round`), never on evaluation seeds. The mean of
-several students' actions averages out the errors they do not share: on the paper, the clones
-that fail a mission fail different seeds (baselines/RESULTS.md, "Ensembles of GPU-trained
-students").
+several students' actions averages out the errors they do not share: on the paper, the clones that
+fail a mission fail different seeds (baselines/RESULTS.md, "Ensembles of GPU-trained students").
 
-The output directory holds ``policy.pt`` (load with ``uav-formation evaluate --policy DIR``),
-``scenario.yaml`` (the members') and ``config.yaml`` (``algorithm: dagger_ensemble``, the
-members with their scores, their summed agent-steps and wall times).
+The output directory holds the policy (``policy.json``, ``policy.npz``; load with ``uav-formation
+evaluate --policy DIR``), ``scenario.yaml`` (the members') and ``config.yaml`` (``algorithm:
+dagger_ensemble``, the members with their scores, their summed agent-steps and wall times).
 """
 
 from __future__ import annotations
@@ -24,14 +23,19 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import torch
+import numpy as np
 import yaml
 
-from uav_formation_baselines.torch_policy import MeanEnsemble, save_policy
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config_io import load_scenario, save_scenario
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation.heldout import report_run
+from uav_formation_env.policies.policy_file import (
+    JSON_NAME,
+    load_policy_file,
+    merge_members,
+    save_policy_file,
+)
 from uav_formation_env.scenes import seeds_by_n_uav
 
 __all__ = ["build_ensemble", "rank_runs", "validation_score"]
@@ -84,7 +88,7 @@ def build_ensemble(
     if top is not None and (isinstance(top, bool) or not isinstance(top, int) or top < 1):
         raise ValueError(f"top must be an integer >= 1, got {top!r}")
     for run in runs:
-        for name in ("policy.pt", "scenario.yaml", "config.yaml"):
+        for name in (JSON_NAME, "scenario.yaml", "config.yaml"):
             if not (Path(run) / name).is_file():
                 raise FileNotFoundError(f"{run} is not a finished run: no {name}")
     ranked = rank_runs(runs)[:top]
@@ -92,14 +96,32 @@ def build_ensemble(
     for run, _ in ranked[1:]:
         if load_scenario(run / "scenario.yaml") != scenario:
             raise ValueError(f"{run}/scenario.yaml differs from {ranked[0][0]}/scenario.yaml")
-    members = [torch.jit.load(str(run / "policy.pt"), map_location="cpu") for run, _ in ranked]
-    # observations the exported file is checked on: the first of the scenario's episodes 0 and 1
+    policies = [load_policy_file(run) for run, _ in ranked]
+    activations = {policy.header["activation"] for policy in policies}
+    if len(activations) != 1:
+        raise ValueError(f"the members use different activations: {sorted(activations)}")
+    if any(policy.header["action"] != "clip" for policy in policies):
+        raise ValueError("an ensemble averages unsquashed actions: members need action 'clip'")
+    members, mean, std = merge_members([part for p in policies for part in p.parts()])
+    out = Path(out)
+    save_policy_file(
+        out,
+        members,
+        mean,
+        std,
+        observation=scenario.observation.kind,
+        activation=activations.pop(),
+        metadata={"scenario": scenario.name, "algorithm": "dagger_ensemble"},
+    )
+    # the file must give the members' mean action on the first observations of episodes 0, 1
     # (of one N: a scene distribution over N, random_swarm, may draw two)
     n_uav, seeds = next(iter(seeds_by_n_uav(scenario, [0, 1]).items()))
     sample = FormationEpisodes(scenario, len(seeds), n_uav=n_uav).reset(seed=seeds).observation
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    save_policy(MeanEnsemble(members), out / "policy.pt", sample.reshape(-1, sample.shape[-1]))
+    sample = sample.reshape(-1, sample.shape[-1])
+    want = np.clip(sum(policy.outputs(sample) for policy in policies) / len(policies), -1, 1)
+    difference = float(abs(load_policy_file(out).act_flat(sample) - want).max())
+    if difference > 1e-5:
+        raise RuntimeError(f"the ensemble differs from its members' mean by {difference:.3g}")
     save_scenario(scenario, out / "scenario.yaml")
     records = []
     for run, _ in ranked:
@@ -141,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 2
     names = ", ".join(Path(m["run"]).name for m in record["members"])
-    print(f"wrote {args.out}/policy.pt: the mean of {len(record['members'])} members ({names})")
+    print(f"wrote the policy {args.out}: the mean of {len(record['members'])} members ({names})")
     report_run(args.out, args.heldout_seeds)
     return 0
 

@@ -41,6 +41,7 @@ from uav_formation_env.evaluation import (
     summarise_groups,
     write_json,
 )
+from uav_formation_env.policies.policy_file import is_policy_dir
 from uav_formation_env.policies.registry import POLICY_NAMES, SIMPLE_POLICIES
 
 REFERENCE = "lfpio"  # the policy whose realised cost the ratio column divides by
@@ -55,12 +56,12 @@ OUTPUT_FILES = (
 
 def model_path(run: str | Path, best: bool = False) -> Path:
     """The model file of a run directory (``model.zip`` or ``best/model.zip`` of an SB3 run, or
-    ``policy.pt`` of the DAgger, BenchMARL and RLlib recipes) or a model file."""
+    the policy directory of the DAgger, BenchMARL and RLlib recipes) or a model file."""
     run = Path(run)
     if run.is_file() or (run / "policy.json").is_file():  # a file, or a policy directory
         return run
-    if not best and (run / "policy.pt").is_file():
-        return run / "policy.pt"
+    if not best and is_policy_dir(run):
+        return run
     path = run / "best" / "model.zip" if best else run / "model.zip"
     if not path.is_file():
         raise ValueError(f"no model at {path}")

@@ -11,24 +11,22 @@ learner of round r - 1, each copy and step executing the teacher's action with p
 ``beta ** r`` and the learner's otherwise, and the teacher labels every visited observation
 (DAgger, Ross et al. 2011): the learner is taught what to do where its own mistakes lead. After
 each round the MLP (:class:`~uav_formation_baselines.torch_policy.NormalisedMLP`) is refitted on
-everything gathered so far (mean squared error on the normalised action) and exported as
-``rounds/<r>/policy.pt``; its validation episodes are flown by the project's runner and scored
-with the mission metrics. ``policy.pt`` is the round with the most completed validation missions
-(then the lowest realised cost).
+everything gathered so far (mean squared error on the normalised action) and exported as the
+policy directory ``rounds/<r>/`` (:mod:`uav_formation_env.policies.policy_file`); its validation
+episodes are flown by the project's runner and scored with the mission metrics. The run's policy
+(``policy.json`` + ``policy.npz``) is the round with the most completed validation missions (then
+the lowest realised cost).
 
 Training seeds start at ``seed_start`` (10,000), validation seeds at ``validation_seed_start``
 (5,000), both apart from the held-out evaluation seeds (0-99) and the SB3 evaluation seeds (1000+).
 A scene distribution with several N (``random_swarm``) is flown one group of equal N at a time,
 and the learner must then use the N-independent observation (``observation.kind: local``).
 
-The output directory holds ``policy.pt`` (load with ``uav-formation evaluate --policy DIR``),
+The output directory holds the policy (load with ``uav-formation evaluate --policy DIR``),
 ``config.yaml`` (the resolved configuration, scenario name, seed, wall time), ``scenario.yaml``,
 ``rounds.csv`` (per round, written as each ends: samples, loss, validation completion and cost)
-and ``rounds/``. ``--workers`` processes fly each round's episodes
-(:mod:`~uav_formation_baselines.imitation_data`: the same data whatever their number) and the MLP
-is fitted on the GPU when torch sees one (``--device``).
-``--select SEEDS`` chooses a finished run's ``policy.pt`` again on more validation seeds
-(:func:`select_round`).
+and ``rounds/``. ``--workers`` processes fly each round's episodes (the same data whatever their
+number); ``--select SEEDS`` chooses a finished run's round again (:func:`select_round`).
 """
 
 from __future__ import annotations
@@ -54,10 +52,8 @@ from uav_formation_baselines.imitation_select import (
 )
 from uav_formation_baselines.torch_policy import (
     ACTIVATIONS,
-    ApproachFeatures,
     NormalisedMLP,
     save_policy,
-    with_features,
 )
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config import CostConfig, Scenario
@@ -71,7 +67,6 @@ from uav_formation_env.policies import DMPC_OPTIMIZERS
 
 __all__ = [
     "ImitationConfig",
-    "approach_features",
     "best_round",
     "collect",
     "config_section",
@@ -118,14 +113,6 @@ class ImitationConfig:
         obstacle_margin: the steps of a UAV nearer than this to an obstacle's surface are
             weighted ``proximity_weight`` too (0: only the UAV-UAV rule) [m]. Clones that
             failed a mission by a step inside an obstacle grazed it while avoiding.
-        contact_time: the steps of a UAV that would reach an obstacle's surface within this
-            time at its present closing speed (:func:`~uav_formation_baselines.imitation_data.
-            contact_time`) are weighted ``proximity_weight`` too (0: off) [s]. The
-            ``random_fields`` clones' obstacle collisions begin where the avoidance reference
-            turns while the UAV still closes at ~20 m/s some 50 m away (2-3 s): there the
-            teacher brakes at full thrust and the clone follows the turning reference. One
-            ``random_fields`` recipe run with 3 s did not complete more scenes (RESULTS.md,
-            "Where the collisions start").
         validation_seeds: validation episodes per round [-].
         seed_start, validation_seed_start: first training / validation episode seed.
         overrides: scenario field overrides (e.g. ``{observation: {kind: local}}``).
@@ -135,13 +122,6 @@ class ImitationConfig:
             teacher's grazing pass into a collision: on the 20 paper seeds the exact teacher
             passes O1 (radius 30 m) 31.5 m from its centre at the closest, and 39.2 m with the
             clearance term, at a lower paper J (6.55e5 against 7.35e5).
-        approach_features: the MLP also reads each obstacle's closing speed, the reference's,
-            and the deceleration that would stop the UAV at its surface
-            (:class:`~uav_formation_baselines.torch_policy.ApproachFeatures`; local layout
-            only): where the teacher brakes for an obstacle the avoidance reference turns
-            towards, these decide, and a tanh MLP must otherwise build them from products of
-            slots. One ``random_fields`` recipe run with them did not complete more scenes
-            (RESULTS.md, "The obstacle approach as inputs").
         shield: the learner flies its DAgger episodes and its validation behind the safety
             shield (:class:`~uav_formation_env.policies.shield.SafetyShield`, local layout
             only): it learns the teacher's answer in the states the shield leads to, and is
@@ -164,13 +144,11 @@ class ImitationConfig:
     masked_slots: tuple[int, ...] = ()
     proximity_weight: float = 1.0
     obstacle_margin: float = 0.0
-    contact_time: float = 0.0
     validation_seeds: int = 4
     seed_start: int = 10_000
     validation_seed_start: int = 5_000
     overrides: dict[str, Any] = field(default_factory=dict)
     teacher_cost: dict[str, Any] = field(default_factory=dict)
-    approach_features: bool = False
     shield: bool = False
 
     def __post_init__(self) -> None:
@@ -202,11 +180,8 @@ class ImitationConfig:
             raise ValueError(f"proximity_weight must be >= 1, got {self.proximity_weight!r}")
         if not self.obstacle_margin >= 0:
             raise ValueError(f"obstacle_margin must be >= 0 [m], got {self.obstacle_margin!r}")
-        if not self.contact_time >= 0:
-            raise ValueError(f"contact_time must be >= 0 [s], got {self.contact_time!r}")
-        for name in ("shield", "approach_features"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        if not isinstance(self.shield, bool):
+            raise ValueError(f"shield must be true or false, got {self.shield!r}")
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate!r}")
         if self.duration is not None and not self.duration > 0:
@@ -264,33 +239,14 @@ def teacher_scenario(scenario: Scenario, config: ImitationConfig) -> Scenario:
 def sample_weights(
     nearest: np.ndarray,
     clearance: np.ndarray,
-    contact: np.ndarray,
     scenario: Scenario,
     config: ImitationConfig,
 ) -> np.ndarray:
     """(M,) loss weights: ``config.proximity_weight`` where another UAV is nearer than the
-    separation distance d_s, an obstacle's surface nearer than ``config.obstacle_margin`` [m]
-    or reached sooner than ``config.contact_time`` [s] (``contact``, (M,) [s]), else 1."""
-    close = (
-        (nearest < scenario.cost.separation_distance)
-        | (clearance < config.obstacle_margin)
-        | (contact < config.contact_time)
-    )
+    separation distance d_s or an obstacle's surface nearer than ``config.obstacle_margin`` [m],
+    else 1."""
+    close = (nearest < scenario.cost.separation_distance) | (clearance < config.obstacle_margin)
     return np.where(close, config.proximity_weight, 1.0)
-
-
-def approach_features(scenario: Scenario, config: ImitationConfig) -> ApproachFeatures | None:
-    """The :class:`ApproachFeatures` of ``scenario``'s local layout if
-    ``config.approach_features``, else None; a ``ValueError`` if the layout is not local."""
-    if not config.approach_features:
-        return None
-    observation = scenario.observation
-    if observation.kind != "local":
-        raise ValueError(
-            "approach_features needs the local observation (overrides: {observation: {kind: "
-            f"local}}), the scenario has {observation.kind!r}"
-        )
-    return ApproachFeatures(observation.neighbours, observation.obstacles, observation.nearest)
 
 
 def fit(
@@ -401,7 +357,6 @@ def _train(
     if config.duration is not None:
         patch["duration"] = float(config.duration)
     scen = with_overrides(scen, patch) if patch else scen
-    features = approach_features(scen, config)  # checks the layout before anything is written
     out = Path(out)
     (out / "rounds").mkdir(parents=True, exist_ok=True)
     save_scenario(scen, out / "scenario.yaml")
@@ -425,7 +380,7 @@ def _train(
                 (start_steps, base + 50_000 + r * config.start_episodes, config.start_episodes)
             )
         for part, (steps, first, count) in enumerate(parts):
-            obs, actions, nearest, clearance, contact = collect_in_workers(
+            obs, actions, nearest, clearance = collect_in_workers(
                 pool,
                 workers,
                 list(range(first, first + count)),
@@ -441,18 +396,15 @@ def _train(
             )
             all_obs.append(obs)
             all_actions.append(actions)
-            all_weights.append(sample_weights(nearest, clearance, contact, scen, config))
+            all_weights.append(sample_weights(nearest, clearance, scen, config))
         data_obs, data_actions = np.concatenate(all_obs), np.concatenate(all_actions)
         if model is None:  # normalise by the teacher's own state distribution, fixed afterwards
-            with torch.no_grad():
-                inputs = with_features(torch.as_tensor(data_obs), features).numpy()
             model = NormalisedMLP(
-                inputs.mean(axis=0),
-                inputs.std(axis=0),
+                data_obs.mean(axis=0),
+                data_obs.std(axis=0),
                 config.hidden,
                 config.activation,
                 masked_slots=config.masked_slots,
-                features=features,
             )
         loss = fit(
             model,
@@ -463,7 +415,13 @@ def _train(
             np.concatenate(all_weights),
             device=fit_device,
         )
-        path = save_policy(model, out / "rounds" / str(r) / "policy.pt", data_obs[:64])
+        path = save_policy(
+            model,
+            out / "rounds" / str(r),
+            data_obs[:64],
+            observation=scen.observation.kind,
+            metadata={"scenario": scen.name, "algorithm": "dagger", "round": r, "seed": seed},
+        )
         learner_path = str(path)
         row = {
             "round": r,
@@ -535,7 +493,7 @@ def main(argv: list[str] | None = None) -> int:
         type=int,
         default=None,
         metavar="SEEDS",
-        help="do not train: choose the finished run's policy.pt again on this many validation "
+        help="do not train: choose the finished run's round again on this many validation "
         "seeds (select_round)",
     )
     parser.add_argument(
@@ -572,7 +530,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, KeyError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    print(f"wrote {args.out}/policy.pt {done}")
+    print(f"wrote the policy of {args.out} {done}")
     if args.select is None:  # a new policy: its mission on held-out seeds
         report_run(args.out, args.heldout_seeds)
     return 0

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.obstacles import ObstacleField
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation import EpisodeBatch, run_episode_groups
 from uav_formation_env.policies import make_policy
@@ -26,30 +25,9 @@ from uav_formation_env.policies.dmpc import NashDMPCPolicy
 from uav_formation_env.policies.shield import SafetyShield
 from uav_formation_env.scenes import seeds_by_n_uav
 
-__all__ = ["collect", "collect_in_workers", "contact_time", "fly", "fly_in_workers", "worker_pool"]
+__all__ = ["collect", "collect_in_workers", "fly", "fly_in_workers", "worker_pool"]
 
-Samples = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-
-
-def contact_time(z: np.ndarray, field: ObstacleField) -> np.ndarray:
-    """(B, N) time until each UAV would reach the nearest obstacle surface at its present closing
-    speed [s]: per obstacle, the horizontal distance to its surface over the horizontal velocity
-    component toward its centre; 0 inside an obstacle, +inf where the UAV closes on none.
-
-    Args:
-        z: (B, N, 6) state [m, m/s].
-        field: the copies' obstacles (B, O, ...); padding obstacles never count.
-    """
-    p, v = z[..., None, :2], z[..., None, 3:5]  # (B, N, 1, 2)
-    towards = np.asarray(field.centres)[:, None] - p  # (B, N, O, 2) [m]
-    distance = np.linalg.norm(towards, axis=-1)
-    surface = distance - np.asarray(field.radii)[:, None]
-    closing = np.sum(v * towards, axis=-1) / np.maximum(distance, 1e-9)  # [m/s]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        time = np.where(closing > 0, surface / closing, np.inf)
-    time = np.where(surface <= 0, 0.0, time)
-    time = np.where(np.asarray(field.present)[:, None], time, np.inf)
-    return time.min(axis=-1, initial=np.inf)
+Samples = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 def collect(
@@ -86,10 +64,10 @@ def collect(
             visit the states the shielded learner leads to; the labels stay the teacher's.
 
     Returns:
-        ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m], clearance (M,) [m],
-        contact (M,) [s])`` ordered by episode (as ``seeds``), then step, then UAV; ``nearest``
-        is the distance from the UAV to its nearest other UAV, ``clearance`` to the nearest
-        obstacle surface (inf without obstacles), ``contact`` the UAV's :func:`contact_time`.
+        ``(obs (M, dim) float32, actions (M, 3) float32, nearest (M,) [m], clearance (M,) [m])``
+        ordered by episode (as ``seeds``), then step, then UAV; ``nearest`` is the distance from
+        the UAV to its nearest other UAV, ``clearance`` to the nearest obstacle surface (inf
+        without obstacles).
     """
     learner = _learner(learner, scenario, shield)
     steps = scenario.n_steps if n_steps is None else min(n_steps, scenario.n_steps)
@@ -106,7 +84,7 @@ def collect(
         links = getattr(teacher, "needs_neighbour_index", False)
         # (B, steps): one stream per episode, drawn once here rather than per copy and step
         coins = np.stack([np.random.default_rng([mix_seed, s]).random(steps) for s in group])
-        rows: list[list[np.ndarray]] = [[], [], [], [], []]  # per step, (B, N, ...)
+        rows: list[list[np.ndarray]] = [[], [], [], []]  # per step, (B, N, ...)
         for k in range(steps):
             obs = step.observation
             label = (
@@ -116,7 +94,6 @@ def collect(
             rows[1].append(np.asarray(label, dtype=np.float32))
             rows[2].append(np.asarray(step.result.min_separation, dtype=float))
             rows[3].append(np.asarray(step.result.obstacle_distance, dtype=float))
-            rows[4].append(contact_time(np.asarray(step.result.z), episodes.sim.field))
             action = label
             if learner is not None and teacher_probability < 1.0:
                 own = np.asarray(learner.act_batch(obs), dtype=float)

@@ -54,8 +54,9 @@ def write_rows(path: Path, rows: list[dict[str, Any]]) -> None:
 
 
 def keep_round(out: Path, round_index: int) -> None:
-    """Make ``rounds/<round_index>/policy.pt`` the run's ``policy.pt``."""
-    (out / "policy.pt").write_bytes((out / "rounds" / str(round_index) / "policy.pt").read_bytes())
+    """Make the policy of ``rounds/<round_index>/`` the run's (``policy.json``, ``policy.npz``)."""
+    for name in ("policy.json", "policy.npz"):
+        (out / name).write_bytes((out / "rounds" / str(round_index) / name).read_bytes())
 
 
 def best_round(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -70,15 +71,15 @@ def select_round(
     validation_seed_start: int | None = None,
     workers: int = 1,
 ) -> dict[str, Any]:
-    """Choose a finished run's ``policy.pt`` again, on more validation seeds.
+    """Choose a finished run's round again, on more validation seeds.
 
     Eight validation episodes tell rounds apart by one mission at most (the paper students
     complete 90-95 % of their missions), so the round that training kept is partly chance.
-    Every ``rounds/<r>/policy.pt`` of the run in ``out`` is flown on the seeds
+    Every round's policy ``rounds/<r>/`` of the run in ``out`` is flown on the seeds
     ``validation_seed_start`` .. + ``validation_seeds`` - 1 (default start: the run's own,
     5,000, apart from the evaluation seeds 0-99) and scored like training's validation
-    (:func:`best_round`); the rows go to ``selection.csv``, the chosen round is copied to
-    ``policy.pt`` and recorded under ``selection`` in ``config.yaml``.
+    (:func:`best_round`); the rows go to ``selection.csv``, the chosen round is copied to the
+    run's policy and recorded under ``selection`` in ``config.yaml``.
 
     Returns:
         the chosen round's row (round, validation_completed, validation_cost, ...).
@@ -104,7 +105,7 @@ def select_round(
     pool = worker_pool(workers)
     try:
         for r in sorted(int(p.name) for p in (out / "rounds").iterdir() if p.name.isdigit()):
-            learner = out / "rounds" / str(r) / "policy.pt"
+            learner = out / "rounds" / str(r)
             scores = validation_scores(scen, learner, seeds, pool, workers, shield)
             rows.append({"round": r, **scores})
     finally:

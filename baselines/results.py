@@ -1,7 +1,7 @@
 """The results table of the learned baselines: one row per algorithm over its training seeds.
 
     python -m uav_formation_baselines.results runs/dagger_paper_s0 runs/dagger_paper_s1 ... \
-        --seeds 20 --compare lfpio pio exact nash --out baselines/eval_results/paper_learned
+        --seeds 20 --compare lfpio pio exact nash --out results/paper_learned
 
 Every run directory (DAgger, BenchMARL, SB3 or RLlib recipe) is flown deterministically on the
 same held-out seeds of one scenario (``--scenario``, else the first run's), each model through the

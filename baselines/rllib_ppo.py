@@ -2,7 +2,7 @@
 
     uav-formation train --algo rllib-ppo --iterations 20 --num-env-runners 2 --out runs/rllib
     uav-formation train --algo rllib-ppo --address auto ...      # an existing cluster
-    uav-formation evaluate --policy runs/rllib/policy.pt --seeds 5
+    uav-formation evaluate --policy runs/rllib --seeds 5
 
 RLlib's ``ParallelPettingZooEnv`` wraps ``parallel_env(scenario, <training devices>)`` unpatched;
 every agent maps to the one RLModule ``"shared"``. ``--num-env-runners K`` samples on K remote
@@ -10,12 +10,11 @@ env runners (Ray actors, one CPU each); 0 samples in the driver. The training de
 episode layer's options (:data:`TRAINING_DEVICES`: log-compressed reward, divergence truncation,
 mission corridor), nothing RLlib-specific.
 
-A run directory holds ``checkpoint/`` (RLlib's, to resume: ``--resume``), ``policy.pt`` (the
-shared actor as TorchScript: observation (B, 47) -> the Gaussian's mean and log-std (B, 6); the
-deterministic action is the mean, clipped to [-1, 1]), ``scenario.yaml`` (the scenario as
-evaluated, without the training devices), ``progress.csv`` and ``config.yaml``. ``policy.pt``
-needs only torch: ``uav-formation evaluate --policy PATH/policy.pt`` runs it
-(:class:`uav_formation_env.policies.learned.TorchScriptPolicy`) without Ray.
+A run directory holds ``checkpoint/`` (RLlib's, to resume: ``--resume``), the shared actor as a
+policy file (``policy.json`` + ``policy.npz``, :mod:`uav_formation_env.policies.policy_file`:
+the Gaussian's mean, clipped to [-1, 1], is the deterministic action), ``scenario.yaml`` (the
+scenario as evaluated, without the training devices), ``progress.csv`` and ``config.yaml``. The
+policy needs only numpy: ``uav-formation evaluate --policy PATH`` runs it without Ray or torch.
 
 RLlib is the ``[rllib]`` extra in a virtual environment of its own (``ray[rllib]`` 2.60 pins
 gymnasium 1.2.2); ``tests/rllib/run.sh`` builds one.
@@ -103,8 +102,12 @@ def shared_parameters(algo) -> dict[str, Any]:
 
 
 def export_policy(algo, path: str | Path, obs_dim: int) -> Path:
-    """The shared actor as TorchScript: (B, obs_dim) float32 -> (B, 6) Gaussian mean, log-std."""
+    """The shared actor (its encoder and ``pi`` head, not the critic's) as a policy file in
+    directory ``path``: (B, obs_dim) observations -> the Gaussian's mean, clipped."""
+    import numpy as np
     import torch
+
+    from uav_formation_baselines.torch_policy import save_policy
 
     module = algo.get_module(MODULE_ID)
 
@@ -116,13 +119,9 @@ def export_policy(algo, path: str | Path, obs_dim: int) -> Path:
         def forward(self, obs: torch.Tensor) -> torch.Tensor:
             return self.module.forward_inference({"obs": obs})["action_dist_inputs"]
 
-    actor = Actor().eval()
-    with torch.no_grad():
-        # RLlib's forward pass is plain tensor code once traced; checks off for its dict keys
-        traced = torch.jit.trace(actor, torch.zeros(2, obs_dim), check_trace=False)
-    path = Path(path)
-    traced.save(str(path))
-    return path
+    sample = np.random.default_rng(0).normal(size=(16, obs_dim)).astype(np.float32)
+    exclude = ("critic", "vf")
+    return save_policy(Actor().eval(), path, sample, observation="full", exclude=exclude)
 
 
 def train(args: argparse.Namespace) -> dict[str, Any]:
@@ -170,7 +169,7 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
             if checkpoint.exists():
                 shutil.rmtree(checkpoint)
             algo.save(str(checkpoint.resolve()))
-            export_policy(algo, out / "policy.pt", observation_dim(scenario.n_uav))
+            export_policy(algo, out, observation_dim(scenario.n_uav))
         finally:
             logdir = getattr(algo, "logdir", None)
             algo.stop()
@@ -193,7 +192,7 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
     }
     with open(out / "config.yaml", "w", encoding="utf-8") as stream:
         yaml.safe_dump({**summary, "args": vars(args)}, stream, sort_keys=False)
-    print(f"wrote {out / 'policy.pt'}, {checkpoint}, progress.csv, scenario.yaml")
+    print(f"wrote the policy {out}, {checkpoint}, progress.csv, scenario.yaml")
     return summary
 
 

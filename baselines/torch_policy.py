@@ -1,20 +1,17 @@
-"""The exported form of a learned shared policy: one TorchScript file any trainer can write.
+"""Torch policies to the learned-policy file format (``policy.json`` + ``policy.npz``).
 
 Every learned baseline (behaviour cloning, BenchMARL's MAPPO / IPPO / MASAC, RLlib) ends as a
-``policy.pt``: a TorchScript module mapping (M, dim) float32 observations to (M, 6) values, the
-mean action (3, normalised, clipped to [-1, 1] by the reader) and a log standard deviation (3).
-:class:`uav_formation_env.policies.learned.TorchScriptPolicy` reads it, so
-``uav-formation evaluate --policy DIR/policy.pt`` and every notebook fly it without the trainer
-installed.
+policy directory of :mod:`uav_formation_env.policies.policy_file`: arrays that numpy flies and
+that load without running code, so ``uav-formation evaluate --policy DIR`` and every notebook
+fly it without the trainer (or torch) installed.
 
-:class:`NormalisedMLP` is the network behaviour cloning trains and exports; :func:`save_policy`
-traces and saves any module of that contract, and checks that the saved file gives the same
-numbers as the module on sample observations.
+:class:`NormalisedMLP` is the network behaviour cloning trains; :func:`save_policy` turns it, a
+list of them (an ensemble) or any plain MLP chain into arrays, and checks that the saved file
+gives the module's actions on sample observations.
 """
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -22,18 +19,19 @@ import numpy as np
 import torch
 from torch import nn
 
-from uav_formation_env.core.local_observation import decode_local_observations
+from uav_formation_env.policies.policy_file import (
+    load_policy_file,
+    merge_members,
+    save_policy_file,
+)
 
 __all__ = [
     "ACTIVATIONS",
-    "ApproachFeatures",
-    "MeanEnsemble",
     "NormalisedMLP",
+    "policy_arrays",
     "save_policy",
-    "with_features",
 ]
 
-BRAKING_CLIP = 100.0  # [m/s^2]: a UAV at or inside a surface needs "more than any thrust"
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {
     "tanh": nn.Tanh,
@@ -42,53 +40,6 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {
     "gelu": nn.GELU,
     "silu": nn.SiLU,
 }
-
-
-class ApproachFeatures(nn.Module):
-    """How fast each UAV approaches each obstacle of its local observation, and the braking it
-    would need: values the network would otherwise have to build from products of slots.
-
-    Per obstacle slot q (horizontal plane; an empty slot, all zeros, gives zeros):
-
-    - the closing speed v . c_q [m/s], c_q the unit vector from the UAV to the obstacle's centre,
-    - the reference's closing speed v^d . c_q [m/s],
-    - the deceleration that stops the closing motion at the surface, max(v . c_q, 0)^2 / (2 g_q)
-      [m/s^2] (g_q the distance to the surface, floored at 1 m; clipped at
-      :data:`BRAKING_CLIP`).
-
-    Args:
-        neighbours, obstacles, nearest: the local layout's k, m and r
-            (:mod:`uav_formation_env.core.local_observation`).
-    """
-
-    def __init__(self, neighbours: int, obstacles: int, nearest: int) -> None:
-        super().__init__()
-        self.layout = (int(neighbours), int(obstacles), int(nearest))
-        self.size = 3 * int(obstacles)
-
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        """(M, dim) local observations -> (M, 3 m) float32 features, slot by slot."""
-        with warnings.catch_warnings():
-            # decode's check of the last axis reads a shape: a constant of the trace, which is
-            # right (the layout is fixed); save_policy verifies the file on another batch size
-            warnings.simplefilter("ignore", torch.jit.TracerWarning)
-            decoded = decode_local_observations(obs, *self.layout)
-        relative = decoded.obstacle_relative  # (M, m, 2) [m]
-        towards = relative / torch.linalg.vector_norm(relative, dim=-1, keepdim=True).clamp_min(
-            1e-6
-        )
-        closing = (decoded.velocity[..., None, :2] * towards).sum(dim=-1)  # (M, m) [m/s]
-        reference = (decoded.reference_velocity[..., None, :2] * towards).sum(dim=-1)
-        gap = decoded.obstacle_surface.clamp_min(1.0)  # [m]
-        braking = (torch.relu(closing) ** 2 / (2.0 * gap)).clamp_max(BRAKING_CLIP)
-        features = torch.stack((closing, reference, braking), dim=-1)  # 0 in an empty slot
-        return features.reshape(*features.shape[:-2], self.size).float()
-
-
-def with_features(obs: torch.Tensor, features: nn.Module | None) -> torch.Tensor:
-    """(M, dim) observations -> (M, dim + F): ``obs`` with ``features(obs)`` appended (``obs``
-    itself when ``features`` is None); what :class:`NormalisedMLP` standardises."""
-    return obs if features is None else torch.cat((obs, features(obs)), dim=-1)
 
 
 class NormalisedMLP(nn.Module):
@@ -102,9 +53,6 @@ class NormalisedMLP(nn.Module):
         log_std: the exported log standard deviation of the action (unused by deterministic
             evaluation; kept so the file has the TorchScript policy contract).
         masked_slots: observation slots the network never sees (set to 0 after standardising).
-        features: a module (M, dim) -> (M, F) whose values are appended to the observation
-            before standardising (e.g. :class:`ApproachFeatures`); ``obs_mean`` and ``obs_std``
-            are then (dim + F,), the statistics of :meth:`inputs`.
     """
 
     def __init__(
@@ -115,10 +63,8 @@ class NormalisedMLP(nn.Module):
         activation: str = "tanh",
         log_std: float = -2.0,
         masked_slots: Sequence[int] = (),
-        features: nn.Module | None = None,
     ) -> None:
         super().__init__()
-        self.features = features
         if activation not in ACTIVATIONS:
             raise ValueError(f"activation must be one of {sorted(ACTIVATIONS)}, got {activation!r}")
         mean = torch.as_tensor(np.asarray(obs_mean, dtype=np.float32))
@@ -144,13 +90,9 @@ class NormalisedMLP(nn.Module):
         self.net = nn.Sequential(*layers)
         self.log_std = nn.Parameter(torch.full((3,), float(log_std)), requires_grad=False)
 
-    def inputs(self, obs: torch.Tensor) -> torch.Tensor:
-        """(M, dim) observations -> (M, dim + F): with the ``features`` appended, unscaled."""
-        return with_features(obs, self.features)
-
     def mean_action(self, obs: torch.Tensor) -> torch.Tensor:
         """(M, dim) observations -> (M, 3) mean normalised action (unclipped)."""
-        return self.net((self.inputs(obs) - self.obs_mean) / self.obs_std * self.input_mask)
+        return self.net((obs - self.obs_mean) / self.obs_std * self.input_mask)
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         """(M, dim) observations -> (M, 6): mean action and log-std."""
@@ -158,50 +100,110 @@ class NormalisedMLP(nn.Module):
         return torch.cat([mean, self.log_std.expand_as(mean)], dim=-1)
 
 
-class MeanEnsemble(nn.Module):
-    """Several policies of this contract as one: (M, dim) -> (M, 6), the members' mean of each
-    output (mean action and log-std).
+def _layers(linears: Sequence[nn.Linear]) -> list[tuple[np.ndarray, np.ndarray]]:
+    return [
+        (
+            layer.weight.detach().cpu().double().numpy(),
+            layer.bias.detach().cpu().double().numpy(),
+        )
+        for layer in linears
+    ]
+
+
+def _activation_name(module: nn.Module) -> str:
+    """The key of :data:`ACTIVATIONS` of the one activation type inside ``module``."""
+    names = {
+        name for sub in module.modules() for name, cls in ACTIVATIONS.items() if type(sub) is cls
+    }
+    if len(names) != 1:
+        raise ValueError(f"expected one activation type of {sorted(ACTIVATIONS)}, found {names}")
+    return names.pop()
+
+
+def _mlp_part(model: NormalisedMLP) -> tuple[list, np.ndarray, np.ndarray]:
+    """(layers, obs_mean, obs_std) of a :class:`NormalisedMLP`, its input mask folded into the
+    first layer."""
+    layers = _layers([m for m in model.net if isinstance(m, nn.Linear)])
+    mask = model.input_mask.detach().cpu().double().numpy()
+    layers[0] = (layers[0][0] * mask, layers[0][1])
+    return layers, model.obs_mean.cpu().double().numpy(), model.obs_std.cpu().double().numpy()
+
+
+def policy_arrays(
+    module: nn.Module | Sequence[NormalisedMLP], exclude: Sequence[str] = ()
+) -> tuple[list, np.ndarray, np.ndarray, str]:
+    """The arrays of the policy file format of a torch policy: (members, obs_mean, obs_std,
+    activation) for :func:`~uav_formation_env.policies.policy_file.save_policy_file`.
 
     Args:
-        members: modules (or loaded TorchScript policies) of the same observation layout.
+        module: a :class:`NormalisedMLP`, a sequence of them (an ensemble: the mean of their
+            actions), or any module whose ``nn.Linear`` layers, in registration order, form one
+            MLP chain with one activation type (its last layer's first 3 outputs are the action;
+            no observation statistics).
+        exclude: names of submodules to skip in the chain (e.g. a critic's).
     """
+    if isinstance(module, NormalisedMLP):
+        module = [module]
+    if isinstance(module, Sequence):
+        members, mean, std = merge_members([_mlp_part(m) for m in module])
+        return members, mean, std, _activation_name(nn.ModuleList(module))
+    linears = [
+        m
+        for name, m in module.named_modules()
+        if isinstance(m, nn.Linear) and not any(part in name for part in exclude)
+    ]
+    if not linears:
+        raise ValueError("the module has no nn.Linear layers to export")
+    layers = _layers(linears)
+    layers[-1] = (layers[-1][0][:3], layers[-1][1][:3])  # the action; the rest is its spread
+    dim = layers[0][0].shape[1]
+    return [layers], np.zeros(dim), np.ones(dim), _activation_name(module)
 
-    def __init__(self, members: Sequence[nn.Module]) -> None:
-        super().__init__()
-        if not members:
-            raise ValueError("members: give at least one policy")
-        self.members = nn.ModuleList(members)
 
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        """(M, dim) observations -> (M, 6): the members' mean."""
-        return torch.stack([member(obs) for member in self.members]).mean(dim=0)
-
-
-def save_policy(module: nn.Module, path: str | Path, sample: np.ndarray) -> Path:
-    """Trace ``module`` as TorchScript and save it as ``path``; return the path.
+def save_policy(
+    module: nn.Module | Sequence[NormalisedMLP],
+    directory: str | Path,
+    sample: np.ndarray,
+    *,
+    observation: str,
+    action: str = "clip",
+    exclude: Sequence[str] = (),
+    metadata: dict | None = None,
+) -> Path:
+    """Save a torch policy in the policy file format (``DIR/policy.json``, ``DIR/policy.npz``)
+    and check it; return the directory.
 
     Args:
-        module: (M, dim) float32 -> (M, 6) (mean action, log-std).
-        path: the ``.pt`` file (parents created).
-        sample: (M, dim) observations the saved file must map to the module's own outputs
-            (max abs difference <= 1e-6); a ``RuntimeError`` names the difference otherwise.
+        module: see :func:`policy_arrays`; called as (M, dim) float32 -> (M, >= 3), the first 3
+            columns the action before ``action`` (a sequence: the mean of its members').
+        directory: the output directory (created).
+        sample: (M, dim) observations on which the saved file must give the module's actions
+            (max abs difference <= 1e-5, else a ``RuntimeError`` naming it).
+        observation: the scenario's ``observation.kind`` (``"full"`` or ``"local"``).
+        action: ``"clip"`` or ``"tanh"``, as in the file format; a module whose output is
+            already squashed exports with ``"clip"``.
+        exclude, metadata: see :func:`policy_arrays`; free JSON fields of ``policy.json``.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    module = module.eval()
-    obs = torch.as_tensor(np.asarray(sample, dtype=np.float32))
-    # traced, not scripted: scripting re-reads the module's source file, so a run that exports
-    # while its source is being edited fails (seen: a 5-minute BenchMARL run lost at export)
+    members, mean, std, activation = policy_arrays(module, exclude)
+    save_policy_file(
+        directory,
+        members,
+        mean,
+        std,
+        observation=observation,
+        activation=activation,
+        action=action,
+        metadata=metadata,
+    )
+    obs = np.asarray(sample, dtype=np.float32)
+    check = np.concatenate([obs, obs[:1] * 2.0 + 1.0])  # another batch size and other values
+    modules = list(module) if isinstance(module, Sequence) else [module]
     with torch.no_grad():
-        traced = torch.jit.trace(module, obs)
-    traced.save(str(path))
-    loaded = torch.jit.load(str(path), map_location="cpu")
-    check = torch.cat([obs, obs[:1] * 2.0 + 1.0])  # another batch size and other values
-    with torch.no_grad():
-        want, got = module(check), loaded(check)
-    if got.shape != (check.shape[0], 6):
-        raise RuntimeError(f"the exported policy returns {tuple(got.shape)}, expected (M, 6)")
-    difference = float((want - got).abs().max())
-    if difference > 1e-6:
+        outs = [m.eval()(torch.as_tensor(check)).double()[:, :3] for m in modules]
+    want = torch.stack(outs).mean(dim=0).numpy()
+    want = np.tanh(want) if action == "tanh" else np.clip(want, -1.0, 1.0)
+    got = load_policy_file(directory).act_flat(check)
+    difference = float(np.abs(want - got).max())
+    if difference > 1e-5:
         raise RuntimeError(f"the saved policy differs from the module by {difference:.3g}")
-    return path
+    return Path(directory)

@@ -3,17 +3,17 @@
     python -m uav_formation_baselines.train --algo ppo --timesteps 1000000 --out runs/ppo_paper \
         [--scenario paper] [--seed 0] [--copies 8] [--threads 1] [--set key=value ...]
 
-Timesteps are *agent*-timesteps: SB3's ``num_timesteps``, which counts every (copy, agent) entry
-of the :class:`~uav_formation_env.envs.vector.FormationVecEnv`, so one control step of B copies
-of the paper's 5 UAVs is 5 B timesteps (PPO rounds up to whole rollouts of n_steps x 5 B).
+Timesteps are *agent*-timesteps: SB3's ``num_timesteps``, which counts every (copy, agent) entry of
+the :class:`~uav_formation_env.envs.vector.FormationVecEnv`, so one control step of B copies of the
+paper's 5 UAVs is 5 B timesteps (PPO rounds up to whole rollouts of n_steps x 5 B).
 
-The output directory holds ``model.zip`` and ``vecnormalize.pkl`` (load both with
-``uav-formation evaluate --policy DIR``), ``heldout.json`` (the mission on held-out seeds beside
-LFPIO's, printed at the end: :func:`uav_formation_env.evaluation.heldout.heldout_report`),
-``config.yaml`` (resolved hyper-parameters,
-scenario, seed, timesteps, wall time), ``scenario.yaml`` (the evaluated scenario), ``progress.csv``
-and ``tensorboard/`` (SB3 logger), and with evaluation on ``evaluations.csv`` and ``best/``
-(model and statistics of the best evaluation), with checkpoints on ``checkpoints/<steps>/``.
+The output directory holds ``model.zip``, ``obs_stats.npz`` (load both with ``uav-formation evaluate
+--policy DIR``) and ``vecnormalize.pkl`` (to resume), ``heldout.json`` (the mission on held-out
+seeds beside LFPIO's, printed at the end: :func:`uav_formation_env.evaluation.heldout.
+heldout_report`), ``config.yaml`` (resolved hyper-parameters, scenario, seed, timesteps, wall
+time), ``scenario.yaml`` (the evaluated scenario), ``progress.csv`` and ``tensorboard/`` (SB3
+logger), and with evaluation on ``evaluations.csv`` and ``best/`` (model and statistics of the
+best evaluation), with checkpoints on ``checkpoints/<steps>/``.
 """
 
 from __future__ import annotations

@@ -8,12 +8,12 @@ Each of the ``--runs`` students is one DAgger run (:mod:`~uav_formation_baseline
 seeds ``--seed-start`` on) in its own process, ``--parallel`` at a time, each flying its episodes
 in ``--workers`` processes and fitting on ``--device``; the settings come from
 ``hyperparams/bc_ensemble.yml`` (4 rounds of 512 x 512 students, each round scored on 40
-validation seeds). When all have finished, their mean becomes one
-:class:`~uav_formation_baselines.torch_policy.MeanEnsemble`
+validation seeds). When all have finished, their mean becomes one policy
 (:func:`~uav_formation_baselines.ensemble.build_ensemble`), or that of the ``--top K`` students
 whose kept rounds scored best on their validation seeds. Evaluation seeds choose nothing.
 
-The output directory holds the ensemble (``policy.pt``, ``scenario.yaml``; load with
+The output directory holds the ensemble (``policy.json``, ``policy.npz``, ``scenario.yaml``;
+load with
 ``uav-formation evaluate --policy DIR``), ``config.yaml`` (the ensemble's record with the recipe:
 seeds, settings, and ``recipe_wall_time_s``, the time from the first launch to the written
 ensemble) and ``members/seed_<k>/`` (every student's run and ``.log``). On one GPU machine
@@ -211,7 +211,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     names = ", ".join(Path(m["run"]).name for m in record["members"])
     print(
-        f"wrote {args.out}/policy.pt: the mean of {len(record['members'])} of {args.runs} students "
+        f"wrote the policy {args.out}: the mean of {len(record['members'])} of {args.runs} "
+        "students "
         f"({names}) in {record['recipe_wall_time_s']:.0f} s"
     )
     report_run(args.out, args.heldout_seeds, progress=not args.quiet)

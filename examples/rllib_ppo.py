@@ -8,7 +8,7 @@ pins gymnasium 1.2.2); ``bash tests/rllib/run.sh`` builds one. By hand::
     pip install torch==2.13.0 && pip install -e ".[rllib]"
     python examples/rllib_ppo.py --iterations 20 --num-env-runners 2 --out runs/rllib
     python examples/rllib_ppo.py --quick --out /tmp/rllib     # one tiny iteration
-    uav-formation evaluate --policy runs/rllib/policy.pt --seeds 5   # in any environment with torch
+    uav-formation evaluate --policy runs/rllib --seeds 5   # in any environment, numpy alone
 """
 
 from __future__ import annotations

@@ -108,11 +108,9 @@ print("paper's events [s]:", PAPER_EVENTS_S)"""
 RL_VS_REFERENCE = [
     new_markdown_cell(
         "# 02 · Learned baselines against the reference policy: cost *and* mission\n\n"
-        "The shipped models (`baselines/models/`; one policy shared by every UAV): DAgger, an "
-        "MLP cloned from the exact best-response DMPC (`python -m "
-        "uav_formation_baselines.imitation`), the mean of four such students (`python -m "
-        "uav_formation_baselines.ensemble`), and the PPO and SAC models trained on the game "
-        "cost (`python -m uav_formation_baselines.train`). They fly the same seeds through the "
+        "The shipped model of the paper task (`paper_dagger`, installed with the package; one "
+        "policy shared by every UAV): the mean of three MLPs cloned by DAgger from the exact "
+        "best-response DMPC (`python -m uav_formation_baselines.train_ensemble`). It flies the same seeds through the "
         "same code as the LFPIO distributed-MPC reference, PIO, the consensus heuristic and "
         "random actions: `uav_formation_env.evaluation.make_policy`, `run_episodes` and "
         "`summarise`, which is what `uav-formation evaluate` and "
@@ -135,11 +133,11 @@ RL_VS_REFERENCE = [
 import numpy as np
 from IPython.display import Markdown, display
 
-from uav_formation_baselines import MODELS_DIR  # the shipped models (baselines/models/)
 from uav_formation_baselines.evaluate import format_failures, format_markdown
 from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import make_policy, preset_route, run_episodes, summarise
 from uav_formation_env.plotting import draw_obstacles
+from uav_formation_env.policies.registry import model_scenario  # a shipped model's scenario
 
 seeds = list(range(2)) if SMALL else list(range(20))
 
@@ -150,20 +148,8 @@ def short(scenario):
 
 scenario = short(resolve_scenario("paper"))
 policies = {}  # label -> (policy name or model path, the scenario it flies)
-shipped = (
-    ("paper_dagger_ensemble", "DAgger ensemble"),
-    ("paper_dagger_recipe", "DAgger recipe (GPU, 4 min)"),
-    ("paper_dagger_recipe_cpu", "DAgger recipe (2 cores, 23 min)"),
-    ("paper_dagger", "DAgger"),
-    ("paper_ppo", "PPO"),
-    ("paper_sac", "SAC"),
-)
-for run, label in shipped:
-    directory = MODELS_DIR / run
-    model = directory / "policy.pt"
-    model = model if model.is_file() else directory / "model.zip"
-    if model.is_file():  # a model flies the scenario (observation layout) it was trained on
-        policies[label] = (str(model), short(resolve_scenario(directory / "scenario.yaml")))
+# a model flies the scenario (observation layout) it was trained on
+policies["DAgger"] = ("paper_dagger", short(resolve_scenario(model_scenario("paper_dagger"))))
 for name in ("lfpio", "pio", "heuristic", "random"):
     policies[name] = (name, scenario)
 print({label: name for label, (name, _) in policies.items()})"""
@@ -237,8 +223,7 @@ fig.tight_layout()"""
         """from uav_formation_env.evaluation import run_episode_groups, summarise_groups
 from uav_formation_env.scenes import seeds_by_n_uav
 
-students = {"random_fields": "random_fields_dagger_recipe_cpu",
-            "random_swarm": "random_swarm_dagger_recipe_cpu"}
+students = {"random_fields": "random_fields_dagger", "random_swarm": "random_swarm_dagger"}
 task_summaries = {}
 for task, run in students.items():
     drawn = resolve_scenario(task)
@@ -247,9 +232,8 @@ for task, run in students.items():
         by_n = seeds_by_n_uav(drawn, task_seeds)
         task_seeds = by_n[min(by_n)][:1]
     flown = {"lfpio": ("lfpio", drawn)}
-    model = MODELS_DIR / run / "policy.pt"
-    if model.is_file():  # the student flies its own observation layout, on the same scenes
-        flown[run] = (str(model), resolve_scenario(MODELS_DIR / run / "scenario.yaml"))
+    # the student flies its own observation layout, on the same scenes
+    flown[run] = (run, resolve_scenario(model_scenario(run)))
     task_summaries[task] = {
         label: summarise_groups(
             run_episode_groups(scene, make_policy(name, scene), task_seeds, policy_name=label)

@@ -129,7 +129,6 @@ def test_einsum_in_and_asarray_like():
 
 
 @pytest.mark.parametrize("device", DEVICES)
-@pytest.mark.parametrize("mirrored", [False, True])
 @pytest.mark.parametrize(
     "batch, n_uav, graph, per_copy",
     [
@@ -142,30 +141,26 @@ def test_einsum_in_and_asarray_like():
         (3, 6, "none", True),
     ],
 )
-def test_stage_cost_equal_on_torch(device, mirrored, batch, n_uav, graph, per_copy):
+def test_stage_cost_equal_on_torch(device, batch, n_uav, graph, per_copy):
     z, u, ref, adj, offsets = random_case(batch, n_uav, graph, per_copy, seed=n_uav, spread=20.0)
     weights = PAPER.cost
-    expected = stage_cost(z, u, ref, adj, offsets, weights, mirrored)
+    expected = stage_cost(z, u, ref, adj, offsets, weights)
     assert expected.separation.max() > 0  # the separation term is on here
     t = {name: on(x, device) for name, x in dict(z=z, u=u, ref=ref, adj=adj, off=offsets).items()}
-    got = stage_cost(t["z"], t["u"], t["ref"], t["adj"], t["off"], weights, mirrored)
+    got = stage_cost(t["z"], t["u"], t["ref"], t["adj"], t["off"], weights)
     assert_terms_equal(got, expected)
     assert got.formation.device.type == torch.device(device).type
     # the pair distances given as a matrix (and as the grid's pairs within R >= d_s)
     pairs = pair_distances(z[..., :3])
-    got = stage_cost(
-        t["z"], t["u"], t["ref"], t["adj"], t["off"], weights, mirrored, on(pairs, device)
-    )
+    got = stage_cost(t["z"], t["u"], t["ref"], t["adj"], t["off"], weights, on(pairs, device))
     assert_terms_equal(got, expected)
     grid = sensed_pairs(z[..., :3], 12.0)
-    by_grid = stage_cost(z, u, ref, adj, offsets, weights, mirrored, grid)
-    got = stage_cost(t["z"], t["u"], t["ref"], t["adj"], t["off"], weights, mirrored, grid)
+    by_grid = stage_cost(z, u, ref, adj, offsets, weights, grid)
+    got = stage_cost(t["z"], t["u"], t["ref"], t["adj"], t["off"], weights, grid)
     assert_terms_equal(got, by_grid)
     close(got.separation, expected.separation)
     # adjacency and offsets straight from the config as (read-only) numpy
-    got = stage_cost(
-        t["z"], t["u"], t["ref"], np.broadcast_to(adj, adj.shape), offsets, weights, mirrored
-    )
+    got = stage_cost(t["z"], t["u"], t["ref"], np.broadcast_to(adj, adj.shape), offsets, weights)
     assert_terms_equal(got, expected)
 
 
@@ -220,8 +215,7 @@ def test_term_functions_equal_on_torch(device, batch):
         k: on(v, device)
         for k, v in dict(own=own, others=others, views=views, adj=adj, off=offsets).items()
     }
-    for mirrored in (False, True):
-        close(anchored(t["own"], t["off"], mirrored), anchored(own, offsets, mirrored))
+    close(anchored(t["own"], t["off"]), anchored(own, offsets))
     close(formation_error_sq(t["own"], t["others"], t["adj"]), formation_error_sq(own, others, adj))
     close(
         formation_error_sq(t["own"], t["views"], t["adj"], per_receiver=True),

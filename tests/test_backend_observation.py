@@ -123,11 +123,9 @@ def random_common(rng, batch, n_uav, grid=False):
 @pytest.mark.parametrize("batch", [1, 4])
 @pytest.mark.parametrize("n_uav", [2, 5, 9])
 @pytest.mark.parametrize("obstacles", ["none", "shared", "per_copy"])
-@pytest.mark.parametrize("mirrored", [False, True])
-def test_full_observations_equal(device, batch, n_uav, obstacles, mirrored):
+def test_full_observations_equal(device, batch, n_uav, obstacles):
     rng = np.random.default_rng(batch * 100 + n_uav)
     kwargs = random_common(rng, batch, n_uav, grid=obstacles == "per_copy")
-    kwargs["mirrored"] = mirrored
     if obstacles == "none":
         kwargs["obstacle_centers"], kwargs["obstacle_radii"] = np.zeros((0, 2)), np.zeros(0)
     elif obstacles == "shared":

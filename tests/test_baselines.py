@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import csv
 import math
-import pickle
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +18,6 @@ pytest.importorskip("torch")
 from stable_baselines3 import PPO  # noqa: E402
 from stable_baselines3.common.vec_env import VecNormalize  # noqa: E402
 
-from uav_formation_baselines import MODELS_DIR  # noqa: E402
 from uav_formation_baselines.callbacks import live_policy  # noqa: E402
 from uav_formation_baselines.config import (  # noqa: E402
     TRAINING_DEFAULTS,
@@ -61,6 +59,8 @@ from uav_formation_env.evaluation import (  # noqa: E402
     run_episodes,
     summarise,
 )
+from uav_formation_env.policies.learned import ObsStats  # noqa: E402
+from uav_formation_env.policies.registry import MODELS_DIR, SHIPPED_MODELS  # noqa: E402
 from uav_formation_env.scenes import seeds_by_n_uav  # noqa: E402
 
 SHORT_N3 = {"duration": 4.0}  # 20 control steps per episode
@@ -168,20 +168,28 @@ def test_vecnormalize_round_trip(tmp_path):
     path = tmp_path / "vecnormalize.pkl"
     venv.save(str(path))
     loaded = VecNormalize.load(str(path), FormationVecEnv(short_scenario(), 2))
-    with open(path, "rb") as stream:
-        bare = pickle.load(stream)  # as SB3Policy reads it, without a venv
+    ObsStats.of(venv).save(tmp_path / "obs_stats.npz")
+    stats = ObsStats.load(tmp_path / "obs_stats.npz")  # as SB3Policy reads it: no pickle
     assert np.array_equal(loaded.normalize_obs(raw), venv.normalize_obs(raw))
-    assert np.array_equal(bare.normalize_obs(raw), venv.normalize_obs(raw))
+    np.testing.assert_allclose(stats.normalize(raw), venv.normalize_obs(raw), rtol=1e-6)
     assert np.allclose(loaded.obs_rms.mean, venv.obs_rms.mean)
 
 
 # ------------------------------------------------------------------------- PPO smoke run
 def test_ppo_run_writes_every_output(ppo_run):
-    for name in ("model.zip", "vecnormalize.pkl", "config.yaml", "scenario.yaml", "progress.csv"):
+    for name in (
+        "model.zip",
+        "obs_stats.npz",
+        "vecnormalize.pkl",
+        "config.yaml",
+        "scenario.yaml",
+        "progress.csv",
+    ):
         assert (ppo_run / name).is_file(), name
     assert any((ppo_run / "tensorboard").iterdir())
     assert (ppo_run / "best" / "model.zip").is_file()
     assert (ppo_run / "best" / "vecnormalize.pkl").is_file()
+    assert (ppo_run / "best" / "obs_stats.npz").is_file()
     assert sorted(p.name for p in (ppo_run / "checkpoints").iterdir()) == [
         "000000960",
         "000001920",
@@ -216,14 +224,14 @@ def test_trained_model_evaluates_through_the_package(ppo_run):
     assert scenario == short_scenario()
     policy = make_policy(str(ppo_run / "model.zip"), scenario)
     assert isinstance(policy, SB3Policy) and policy.algo == "PPO"
-    assert policy.normalizer is not None and not policy.normalizer.training
+    assert policy.stats is not None  # read from obs_stats.npz: no pickle
     obs = observations_of(*_reset(scenario, seeds=[0, 1]))
     actions = policy.act_batch(obs)
     assert actions.shape == (2, 3, 3) and np.all(np.abs(actions) <= 1.0)
     # the training-time evaluation computes the same actions as the saved model's
-    policy.model.set_env(_normalized_venv(policy, scenario))
+    policy.model.set_env(_normalized_venv(ppo_run, policy, scenario))
     live = live_policy(policy.model)
-    assert np.allclose(live.act_batch(obs), actions)
+    assert np.allclose(live.act_batch(obs), actions, atol=1e-6)
     summary = evaluate_run(ppo_run, seeds=[0, 1])
     assert summary["n_steps"] == 20 and math.isfinite(summary["realised_cost_mean"])
     results = compare([ppo_run], ["heuristic"], seeds=[0])
@@ -261,37 +269,18 @@ def test_sac_smoke_run(tmp_path, scenario_yaml):
 
 
 # ------------------------------------------------------------------------- shipped models
-SHIPPED = sorted(MODELS_DIR.glob("**/model.zip")) if MODELS_DIR.is_dir() else []
-
-
-@pytest.mark.skipif(not SHIPPED, reason="no shipped models under baselines/models yet")
-@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: str(p.parent.relative_to(MODELS_DIR)))
-def test_shipped_models_load_and_act(path):
-    scenario = run_scenario(path)
-    policy = make_policy(str(path), scenario)
-    obs = observations_of(*_reset(scenario, seeds=[0, 1]))
-    actions = policy.act_batch(obs)
-    assert actions.shape == (2, scenario.n_uav, 3)
-    assert np.all(np.isfinite(actions)) and np.all(np.abs(actions) <= 1.0)
-
-
-SHIPPED_TORCHSCRIPT = sorted(MODELS_DIR.glob("**/policy.pt")) if MODELS_DIR.is_dir() else []
-
-
-@pytest.mark.skipif(not SHIPPED_TORCHSCRIPT, reason="no shipped policy.pt under baselines/models")
-@pytest.mark.parametrize(
-    "path", SHIPPED_TORCHSCRIPT, ids=lambda p: str(p.parent.relative_to(MODELS_DIR))
-)
-def test_shipped_torchscript_models_fly_their_scenario(path):
+@pytest.mark.parametrize("name", sorted(SHIPPED_MODELS))
+def test_shipped_models_fly_their_scenario(name):
     # the first 2 s of full-length episodes: a drawn scene fills the episode's duration, so a
     # shorter one would be another scene (or none: random_fields cannot place its field in 2 s)
+    path = MODELS_DIR / name
     scenario = run_scenario(path)
     # two seeds that draw one N (a distribution over N, random_swarm, is flown one N at a time)
     n_uav, seeds = next(
         (n, group[:2]) for n, group in seeds_by_n_uav(scenario, range(40)).items() if len(group) > 1
     )
     episodes = FormationEpisodes(scenario, 2, n_uav=n_uav)
-    policy = make_policy(str(path), scenario)
+    policy = make_policy(name, scenario)
     teacher = _teacher_of(path, scenario)
     if hasattr(policy, "reset"):  # as the runner: stateful policies get one stream per seed
         policy.reset(2, seeds=seeds)
@@ -317,11 +306,11 @@ def _teacher_of(path: Path, scenario):
     """The reference a shipped DAgger clone learned from, planning with its training cost: the
     settings recorded with the model (one student's, or the recipe's), else the shipped bc.yml
     section of its scenario."""
-    with open(path.parent / "config.yaml", encoding="utf-8") as stream:
+    with open(path / "config.yaml", encoding="utf-8") as stream:
         record = yaml.safe_load(stream)
     settings = record.get("config") or record.get("recipe", {}).get("settings")
     config = (
-        ImitationConfig.from_mapping(settings, where=str(path.parent / "config.yaml"))
+        ImitationConfig.from_mapping(settings, where=str(path / "config.yaml"))
         if settings
         else load_config(record["scenario"])
     )
@@ -333,10 +322,11 @@ def _plans_of(step, scenario) -> dict:
     return {"neighbour_index": step.neighbour_index} if scenario.observation.kind == "local" else {}
 
 
-def _normalized_venv(policy, scenario):
-    """The loaded model's VecNormalize around a fresh VecEnv, as during training."""
-    policy.normalizer.set_venv(FormationVecEnv(scenario, policy.model.n_envs // scenario.n_uav))
-    return policy.normalizer
+def _normalized_venv(run, policy, scenario):
+    """The run's VecNormalize (its pickle, made by this test) around a fresh VecEnv, as during
+    training."""
+    venv = FormationVecEnv(scenario, policy.model.n_envs // scenario.n_uav)
+    return VecNormalize.load(str(run / "vecnormalize.pkl"), venv)
 
 
 # ------------------------------------------------------------------------- mission comparison

@@ -7,12 +7,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from uav_formation_env.config import PAPER_ADJACENCY, PAPER_OFFSETS, CostConfig
+from uav_formation_env.config import PAPER_ADJACENCY, PAPER_OFFSETS, CostConfig, FormationConfig
 from uav_formation_env.core.cost import (
     anchored,
     formation_error_sq,
     horizon_cost,
-    relative_offset_sign,
     stage_cost,
     velocity_error_sq,
 )
@@ -201,7 +200,8 @@ def test_stage_cost_equals_brute_force(mirrored: bool) -> None:
     z0, cand, _, ref, adj, offsets = random_case(rng, centre=1e3)
     u = cand[:, :, 0, 0]
     w = CostConfig(q=1.0, r=5.0, m=1.0, n=10.0)
-    st = stage_cost(z0, u, ref[:, :, 0], adj, offsets, w, mirrored=mirrored)
+    # the literal mirrored reading reaches the core as negated offsets (FormationConfig)
+    st = stage_cost(z0, u, ref[:, :, 0], adj, -offsets if mirrored else offsets, w)
     b, n = z0.shape[:2]
     sign = -1.0 if mirrored else 1.0
     for k in range(b):
@@ -268,17 +268,15 @@ def test_offsets_are_zi_minus_zj_v_shape() -> None:
     w = CostConfig()
     assert np.abs(stage_cost(v_shape, u0, ref, adj, offsets, w).total).max() <= 1e-9
     assert stage_cost(mirrored_shape, u0, ref, adj, offsets, w).total.min() > 100.0
-    assert (
-        np.abs(stage_cost(mirrored_shape, u0, ref, adj, offsets, w, mirrored=True).total).max()
-        <= 1e-9
-    )
-    assert stage_cost(v_shape, u0, ref, adj, offsets, w, mirrored=True).total.min() > 100.0
+    literal = FormationConfig(mirrored_offsets=True).slot_offsets  # the literal reading
+    assert np.abs(stage_cost(mirrored_shape, u0, ref, adj, literal, w).total).max() <= 1e-9
+    assert stage_cost(v_shape, u0, ref, adj, literal, w).total.min() > 100.0
     # UAV1 <- {2, 4, 5} in the mirrored shape, by hand: pairs differ by 2 (z^d_i - z^d_j)
     # j=2: 2 * (0 - (-10), 0 - 20) -> 4 (100 + 400) = 2000 ; j=4: 4 (400 + 1600) = 8000 ;
     # j=5: 8000
     st = stage_cost(mirrored_shape, u0, ref, adj, offsets, w)
     assert st.formation[0, 0] == pytest.approx(18000.0, rel=1e-12)
-    assert relative_offset_sign(False) == 1.0 and relative_offset_sign(True) == -1.0
+    np.testing.assert_array_equal(literal, -offsets)
 
 
 def test_anchored_shapes() -> None:
@@ -287,7 +285,7 @@ def test_anchored_shapes() -> None:
     a = anchored(z, offsets)
     assert a.shape == z.shape
     np.testing.assert_array_equal(a[1, 3, 2, 1], -offsets[3])
-    np.testing.assert_array_equal(anchored(z, offsets, mirrored=True)[0, 4, 0, 0], offsets[4])
+    np.testing.assert_array_equal(anchored(z, -offsets)[0, 4, 0, 0], offsets[4])
 
 
 # ------------------------------------------------------------------------------------------------

@@ -51,7 +51,6 @@ def observe(sim: FormationSim, z: np.ndarray | None = None) -> np.ndarray:
         sim.obstacle_centers,
         sim.obstacle_radii,
         r.min_separation,
-        sc.formation.mirrored_offsets,
     )
 
 
@@ -248,7 +247,6 @@ def test_j_pre_equals_horizon_cost_on_global_data(mirrored: bool) -> None:
                 sim.offsets,
                 cost,
                 dt,
-                mirrored,
             )
             return terms.total[..., 0]
 

@@ -1,4 +1,4 @@
-"""Ensembles of learned policies (uav_formation_baselines.ensemble, torch_policy.MeanEnsemble)."""
+"""Ensembles of learned policies (uav_formation_baselines.ensemble)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,11 @@ import yaml
 torch = pytest.importorskip("torch")
 
 from uav_formation_baselines.ensemble import build_ensemble, main, rank_runs  # noqa: E402
-from uav_formation_baselines.torch_policy import (  # noqa: E402
-    MeanEnsemble,
-    NormalisedMLP,
-    save_policy,
-)
+from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides  # noqa: E402
 from uav_formation_env.episode import FormationEpisodes  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
+from uav_formation_env.policies.policy_file import load_policy_file  # noqa: E402
 from uav_formation_env.scenes import seeds_by_n_uav  # noqa: E402
 
 LOCAL = with_overrides(resolve_scenario("paper"), {"observation": {"kind": "local"}})
@@ -38,7 +35,8 @@ def fake_run(
     ``--select``; round 0 scored better, so a reader of the wrong row is caught."""
     torch.manual_seed(seed)
     model = NormalisedMLP(np.zeros(dim), np.ones(dim), (8,), "tanh")
-    save_policy(model, path / "policy.pt", np.zeros((2, dim), np.float32))
+    sample = np.random.default_rng(seed).normal(size=(4, dim)).astype(np.float32)
+    save_policy(model, path, sample, observation=scenario.observation.kind)
     save_scenario(scenario, path / "scenario.yaml")
     record = {"algorithm": "dagger", "seed": seed, "best_round": 1, "agent_steps": 100 * seed}
     record["wall_time_s"] = 10.0 * seed
@@ -63,11 +61,11 @@ def test_the_top_runs_by_validation_are_averaged_into_one_loadable_policy(tmp_pa
     assert (record["agent_steps"], record["wall_time_s"]) == (500, 50.0)  # b and c summed
     assert record["algorithm"] == "dagger_ensemble"
     assert yaml.safe_load((tmp_path / "ens" / "config.yaml").read_text()) == record
-    obs = torch.randn(7, DIM)
-    members = [torch.jit.load(str(tmp_path / name / "policy.pt")) for name in ("b", "c")]
-    loaded = torch.jit.load(str(tmp_path / "ens" / "policy.pt"))
-    with torch.no_grad():
-        torch.testing.assert_close(loaded(obs), (members[0](obs) + members[1](obs)) / 2)
+    obs = np.random.default_rng(0).normal(size=(7, DIM))
+    members = [load_policy_file(tmp_path / name) for name in ("b", "c")]
+    loaded = load_policy_file(tmp_path / "ens")
+    want = (members[0].outputs(obs) + members[1].outputs(obs)) / 2
+    np.testing.assert_allclose(loaded.outputs(obs), want, atol=1e-5)
     policy = make_policy(str(tmp_path / "ens"), LOCAL)  # what evaluate --policy DIR loads
     assert policy.act_batch(np.zeros((1, 5, DIM), np.float32)).shape == (1, 5, 3)
 
@@ -87,15 +85,13 @@ def test_members_of_other_scenes_or_scores_are_refused_in_one_line(tmp_path: Pat
     assert main(["--out", str(tmp_path / "ens"), str(tmp_path / "a"), "--top", "0"]) == 2
     assert capsys.readouterr().err.strip() == "error: top must be an integer >= 1, got 0"
     assert main(["--out", str(tmp_path / "ens"), str(tmp_path / "none")]) == 2
-    assert "is not a finished run: no policy.pt" in capsys.readouterr().err
+    assert "is not a finished run: no policy.json" in capsys.readouterr().err
     lost = fake_run(tmp_path / "d", 4, 40, 7e5)
     (lost / "selection.csv").write_text(
         "round,validation_completed,validation_episodes,validation_cost\n0,40,40,1.0\n"
     )
     with pytest.raises(ValueError, match="selection.csv has no row for the chosen round 1"):
         rank_runs([lost])
-    with pytest.raises(ValueError, match="members: give at least one policy"):
-        MeanEnsemble([])
 
 
 def test_an_ensemble_of_a_scene_distribution_over_n_is_built_and_flies_any_n(

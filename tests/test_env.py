@@ -329,7 +329,6 @@ def test_reward_is_minus_j_without_collision_mode():
             stacked("neighbours"),
             offsets,
             sc.cost,
-            sc.formation.mirrored_offsets,
         ).total[0]
         np.testing.assert_allclose([rewards[a] for a in agents], -expected, rtol=1e-12)
 

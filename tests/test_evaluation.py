@@ -205,10 +205,12 @@ def test_sb3_model_with_vecnormalize(tmp_path):
     model.save(tmp_path / "model.zip")
     venv.save(str(tmp_path / "vecnormalize.pkl"))
 
-    policy = make_policy(str(tmp_path / "model.zip"), short(4.0))
-    assert policy.algo == "PPO" and policy.normalizer is not None
+    with pytest.raises(ValueError, match="refusing to unpickle .*--trust-pickle"):
+        make_policy(str(tmp_path / "model.zip"), short(4.0))
+    policy = make_policy(str(tmp_path / "model.zip"), short(4.0), trust_pickle=True)
+    assert policy.algo == "PPO" and policy.stats is not None
     out = tmp_path / "eval"
-    argv = ["evaluate", "--policy", str(tmp_path / "model.zip"), "--seeds", "2"]
+    argv = ["evaluate", "--policy", str(tmp_path / "model.zip"), "--seeds", "2", "--trust-pickle"]
     assert cli_main([*argv, "--duration", "4", "--quiet", "--out", str(out)]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["n_steps"] == 20 and len(summary["realised_cost_per_uav"]) == 5

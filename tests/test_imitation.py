@@ -15,7 +15,6 @@ torch = pytest.importorskip("torch")
 from uav_formation_baselines import HYPERPARAMS_DIR  # noqa: E402
 from uav_formation_baselines.imitation import (  # noqa: E402
     ImitationConfig,
-    approach_features,
     best_round,
     collect,
     fit,
@@ -28,16 +27,10 @@ from uav_formation_baselines.imitation import (  # noqa: E402
 )
 from uav_formation_baselines.imitation_data import (  # noqa: E402
     collect_in_workers,
-    contact_time,
     worker_pool,
 )
-from uav_formation_baselines.torch_policy import (  # noqa: E402
-    ApproachFeatures,
-    NormalisedMLP,
-    save_policy,
-)
+from uav_formation_baselines.torch_policy import NormalisedMLP, save_policy  # noqa: E402
 from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
-from uav_formation_env.core.obstacles import ObstacleField  # noqa: E402
 from uav_formation_env.episode import FormationEpisodes  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
 from uav_formation_env.policies.dmpc import NashDMPCPolicy  # noqa: E402
@@ -89,8 +82,8 @@ def test_every_section_of_the_shipped_files_configures_its_scenario(name: str) -
 
 
 def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
-    obs, labels, nearest, clearance, contact = collect(SHORT, "exact", [3, 4])
-    assert nearest.shape == clearance.shape == contact.shape == (10 * 2 * 5,)
+    obs, labels, nearest, clearance = collect(SHORT, "exact", [3, 4])
+    assert nearest.shape == clearance.shape == (10 * 2 * 5,)
     assert nearest.min() > 0
     assert obs.shape == (10 * 2 * 5, 47) and labels.shape == (10 * 2 * 5, 3)
     # the same teacher, flown on its own, sees the same observations and acts the same
@@ -98,18 +91,13 @@ def test_teacher_rollout_labels_are_the_teachers_executed_actions() -> None:
     teacher = NashDMPCPolicy(SHORT, "exact", threshold=0.0)
     teacher.reset(2, seeds=[3, 4])
     step = episodes.reset(seed=[3, 4])
-    by_episode = [
-        a.reshape(2, 10, 5, *a.shape[1:]) for a in (obs, labels, nearest, clearance, contact)
-    ]
+    by_episode = [a.reshape(2, 10, 5, *a.shape[1:]) for a in (obs, labels, nearest, clearance)]
     for k in range(10):  # samples come episode by episode, then step, then UAV
         action = teacher.act_batch(step.observation)
         np.testing.assert_array_equal(by_episode[0][:, k], step.observation)
         np.testing.assert_allclose(by_episode[1][:, k], action, atol=1e-6)
         np.testing.assert_array_equal(by_episode[2][:, k], step.result.min_separation)
         np.testing.assert_array_equal(by_episode[3][:, k], step.result.obstacle_distance)
-        np.testing.assert_array_equal(
-            by_episode[4][:, k], contact_time(step.result.z, episodes.sim.field)
-        )
         step = episodes.step(action)
 
 
@@ -183,7 +171,7 @@ def test_masked_slot_is_never_seen_and_export_round_trips(tmp_path: Path) -> Non
     changed[:, 11] += 5.0
     with torch.no_grad():
         assert not torch.equal(a, model(torch.as_tensor(changed)))
-    path = save_policy(model, tmp_path / "policy.pt", sample)
+    path = save_policy(model, tmp_path / "policy", sample, observation="full")
     loaded = make_policy(str(path), SHORT)
     expected = np.clip(a[:, :3].numpy(), -1, 1).reshape(4, 8, 3)
     np.testing.assert_allclose(loaded.act_batch(sample.reshape(4, 8, 47)), expected, atol=1e-6)
@@ -208,38 +196,12 @@ def test_fit_learns_a_feedback_law() -> None:
 def test_sample_weights_mark_close_uavs_and_obstacles() -> None:
     nearest = np.array([5.0, 15.0, 15.0, 15.0, 15.0])  # d_s = 10 m
     clearance = np.array([50.0, 50.0, 3.0, np.inf, 50.0])
-    contact = np.array([9.0, 9.0, 9.0, np.inf, 2.0])  # [s]
     config = ImitationConfig(proximity_weight=20.0, obstacle_margin=5.0)
     np.testing.assert_array_equal(
-        sample_weights(nearest, clearance, contact, SHORT, config), [20, 1, 20, 1, 1]
+        sample_weights(nearest, clearance, SHORT, config), [20, 1, 20, 1, 1]
     )
-    off = ImitationConfig(proximity_weight=20.0)  # margin 0, no contact time: only UAVs count
-    np.testing.assert_array_equal(
-        sample_weights(nearest, clearance, contact, SHORT, off), [20, 1, 1, 1, 1]
-    )
-    closing = ImitationConfig(proximity_weight=20.0, contact_time=3.0)
-    np.testing.assert_array_equal(
-        sample_weights(nearest, clearance, contact, SHORT, closing), [20, 1, 1, 1, 20]
-    )
-
-
-def test_contact_time_is_the_surface_distance_over_the_closing_speed() -> None:
-    # obstacle 0 at (100, 0), radius 20; obstacle 1 at (0, 100), radius 10; a padding obstacle
-    # at the UAVs' own position, which must never count
-    field = ObstacleField(
-        centres=np.array([[[100.0, 0.0], [0.0, 100.0], [0.0, 0.0]]]),
-        radii=np.array([[20.0, 10.0, 1.0]]),
-        r_safe=np.array([[25.0, 15.0, 1.0]]),
-        r_detect=np.array([[50.0, 40.0, 1.0]]),
-        present=np.array([[True, True, False]]),
-    )
-    z = np.zeros((1, 4, 6))
-    z[0, 0, 3:5] = [20.0, 0.0]  # head-on to obstacle 0: 80 m at 20 m/s
-    z[0, 1, 3:5] = [10.0, 10.0]  # 80 m at 10 m/s to obstacle 0, 90 m at 10 m/s to obstacle 1
-    z[0, 2, 3:5] = [-5.0, -5.0]  # closes on neither
-    z[0, 3, :2] = [95.0, 0.0]  # inside obstacle 0, at rest
-    expected = [80.0 / 20.0, 80.0 / 10.0, np.inf, 0.0]
-    np.testing.assert_allclose(contact_time(z, field)[0], expected)
+    off = ImitationConfig(proximity_weight=20.0)  # margin 0: only UAVs count
+    np.testing.assert_array_equal(sample_weights(nearest, clearance, SHORT, off), [20, 1, 1, 1, 1])
 
 
 def test_fit_weights_decide_between_contradicting_labels() -> None:
@@ -266,84 +228,8 @@ def test_train_writes_a_loadable_policy(tmp_path: Path) -> None:
     assert record["agent_steps"] == 2 * 10 * 5
     rows = (tmp_path / "rounds.csv").read_text().strip().splitlines()
     assert len(rows) == 3 and rows[0].startswith("round,samples,close_fraction,loss")
-    policy = make_policy(str(tmp_path / "policy.pt"), SHORT)
+    policy = make_policy(str(tmp_path), SHORT)
     actions = policy.act_batch(np.zeros((1, 5, 47), dtype=np.float32))
-    assert actions.shape == (1, 5, 3)
-
-
-def local_observation(velocity, reference, obstacle) -> np.ndarray:
-    """(95,) a local observation (k = 4, r = 2, m = 2) by hand, from its slots' scales: own and
-    reference velocity [m/s], obstacle slot 0 as (centre x, centre y, radius, surface) relative
-    [m] or None; every other slot empty."""
-    obs = np.zeros(95, dtype=np.float32)
-    obs[0:3] = np.asarray(velocity) / 20.0
-    obs[6:9] = np.asarray(reference) / 20.0
-    if obstacle is not None:
-        obs[85:90] = [1.0, *(np.asarray(obstacle) / 100.0)]
-    return obs
-
-
-def test_approach_features_are_closing_speeds_and_the_braking_needed() -> None:
-    obs = np.stack(
-        [
-            # centre 100 m away along (0.6, 0.8), surface 70 m: closing 20 * 0.6 = 12 m/s, the
-            # reference's 10 * 0.6 + 10 * 0.8 = 14 m/s, braking 12^2 / (2 * 70) m/s^2
-            local_observation([20, 0, 3], [10, 10, 0], [60, 80, 30, 70]),
-            # moving away: closing -20 m/s, no braking
-            local_observation([20, 0, 0], [10, 0, 0], [-100, 0, 50, 50]),
-            # 5 m inside the surface, closing at 20 m/s: the gap floors at 1 m, braking clipped
-            local_observation([20, 0, 0], [0, 0, 0], [10, 0, 15, -5]),
-            local_observation([20, 0, 0], [10, 0, 0], None),  # no obstacle in view
-        ]
-    )
-    features = ApproachFeatures(4, 2, 2)(torch.as_tensor(obs)).numpy()
-    expected = np.zeros((4, 6))
-    expected[0, :3] = [12.0, 14.0, 144.0 / 140.0]
-    expected[1, :3] = [-20.0, -10.0, 0.0]
-    expected[2, :3] = [20.0, 0.0, 100.0]
-    np.testing.assert_allclose(features, expected, rtol=1e-5, atol=1e-5)
-
-
-def test_approach_features_enter_the_exported_policy(tmp_path: Path) -> None:
-    rng = np.random.default_rng(2)
-    sample = np.stack(
-        [local_observation(rng.normal(0, 10, 3), rng.normal(0, 10, 3), [50, 0, 20, 30])] * 8
-    )
-    sample[:, 19:85] = rng.normal(size=(8, 66))
-    features = ApproachFeatures(4, 2, 2)
-    model = NormalisedMLP(np.zeros(101), np.ones(101), (16,), "tanh", features=features)
-    path = save_policy(model, tmp_path / "policy.pt", sample)
-    loaded = torch.jit.load(str(path))
-    obs = torch.as_tensor(sample)
-    with torch.no_grad():
-        by_hand = model.net(torch.cat((obs, features(obs)), dim=-1))  # mean 0, std 1
-        torch.testing.assert_close(loaded(obs)[:, :3], by_hand)
-        assert features(obs).abs().max() > 0.1  # the features are not all zero here
-
-
-def test_approach_features_need_the_local_layout(tmp_path: Path) -> None:
-    config = tiny_config(approach_features=True)
-    with pytest.raises(ValueError, match="approach_features needs the local observation"):
-        train_imitation("paper", tmp_path / "run", config, progress=False)
-    assert not (tmp_path / "run").exists()
-    local = with_overrides(SHORT, {"observation": {"kind": "local"}})
-    assert approach_features(local, config).size == 6
-    assert approach_features(local, tiny_config()) is None
-    with pytest.raises(ValueError, match="approach_features must be true or false"):
-        ImitationConfig(approach_features="yes")
-
-
-def test_train_with_approach_features_writes_a_loadable_policy(tmp_path: Path) -> None:
-    config = tiny_config(
-        rounds=1, episodes=1, approach_features=True, overrides={"observation": {"kind": "local"}}
-    )
-    train_imitation("paper", tmp_path, config, seed=0, progress=False)
-    model = torch.jit.load(str(tmp_path / "policy.pt"))
-    assert model.obs_mean.shape == (101,)  # 95 slots and 3 features per obstacle slot
-    local = with_overrides(SHORT, {"observation": {"kind": "local"}})
-    actions = make_policy(str(tmp_path / "policy.pt"), local).act_batch(
-        np.zeros((1, 5, 95), dtype=np.float32)
-    )
     assert actions.shape == (1, 5, 3)
 
 
@@ -444,7 +330,7 @@ def test_best_round_prefers_completed_missions_then_the_lower_cost() -> None:
 def test_select_round_chooses_again_on_more_validation_seeds(tmp_path: Path, capsys) -> None:
     config = tiny_config(rounds=2, episodes=1, validation_seeds=1)
     train_imitation("paper", tmp_path, config, progress=False)
-    (tmp_path / "policy.pt").write_bytes(b"stale")  # whatever training kept is replaced
+    (tmp_path / "policy.npz").write_bytes(b"stale")  # whatever training kept is replaced
     assert main(["--out", str(tmp_path), "--select", "3"]) == 0
     assert "validation missions" in capsys.readouterr().out
     with open(tmp_path / "selection.csv", encoding="utf-8") as stream:
@@ -460,8 +346,9 @@ def test_select_round_chooses_again_on_more_validation_seeds(tmp_path: Path, cap
         for r in rows
     ]
     chosen = best_round(scored)["round"]
-    kept = (tmp_path / "rounds" / str(chosen) / "policy.pt").read_bytes()
-    assert (tmp_path / "policy.pt").read_bytes() == kept
+    for name in ("policy.json", "policy.npz"):
+        kept = (tmp_path / "rounds" / str(chosen) / name).read_bytes()
+        assert (tmp_path / name).read_bytes() == kept
     record = yaml.safe_load((tmp_path / "config.yaml").read_text())
     assert record["best_round"] == chosen
     assert record["selection"] == {
@@ -487,7 +374,8 @@ def test_select_round_chooses_again_on_more_validation_seeds(tmp_path: Path, cap
 
 def test_an_episode_is_named_by_its_seed_whatever_the_batch_or_the_workers(tmp_path: Path) -> None:
     model = NormalisedMLP(np.zeros(47), np.ones(47), (8,), "tanh")
-    learner = str(save_policy(model, tmp_path / "learner.pt", np.zeros((4, 47), np.float32)))
+    sample = np.zeros((4, 47), np.float32)
+    learner = str(save_policy(model, tmp_path / "learner", sample, observation="full"))
     settings = {
         "scenario": SHORT,
         "teacher_name": "exact",

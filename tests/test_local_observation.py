@@ -447,11 +447,11 @@ def test_decode_inverts_build():
 def test_paper_graph_matches_full_observation(mirrored):
     rng = np.random.default_rng(11)
     batch = 4
-    offsets = np.asarray(PAPER_OFFSETS)
+    offsets = np.asarray(PAPER_OFFSETS) * (-1.0 if mirrored else 1.0)  # the literal reading
     z = offsets[None] + rng.normal(size=(batch, 5, 6)) * [8, 8, 2, 1, 1, 0.3]
     kwargs = inputs(z, PAPER_ADJACENCY, offsets=offsets)
     kwargs["estimate"] = rng.normal(size=(batch, 5, 3)) * 0.2
-    local = build_local_observations(**kwargs, mirrored=mirrored)
+    local = build_local_observations(**kwargs)
     full = build_observations(
         z,
         kwargs["reference_velocity"],
@@ -463,7 +463,6 @@ def test_paper_graph_matches_full_observation(mirrored):
         np.zeros((0, 2)),
         np.zeros(0),
         kwargs["min_separation"],
-        mirrored=mirrored,
     )
     ours, theirs = decode(local.obs), decode_observations(full, 5)
     np.testing.assert_allclose(ours.velocity, theirs.velocity, rtol=1e-6)

@@ -93,17 +93,6 @@ def test_obstacle_skirted_at_100_m_is_not_met_and_fails_the_mission() -> None:
     assert "O1 not met (closest 100 m from its centre)" in m.failures()[0]
 
 
-def test_obstacle_met_at_the_detection_distance_whatever_the_activation_margin() -> None:
-    # nearest UAV 75 m from the centre: beyond d^o = 70 m, inside radius + activation margin 50
-    scenario = straight_scenario(obstacles=[((400.0, 0.0), 30.0)])
-    scenario = with_overrides(scenario, {"avoidance": {"activation_margin": 50.0}})
-    m = mission_metrics(scenario, *flight(scenario, offset=(0.0, 135.0)))
-    assert m.obstacle_closest[0, 0] == pytest.approx(75.0)
-    assert m.obstacle_met.tolist() == [[False]] and m.completed.tolist() == [False]
-    near = mission_metrics(scenario, *flight(scenario, offset=(0.0, 125.0)))  # 65 m: met
-    assert near.obstacle_met.tolist() == [[True]]
-
-
 def test_obstacle_met_on_the_route_and_its_time() -> None:
     scenario = straight_scenario(obstacles=[((400.0, 0.0), 30.0)])
     m = mission_metrics(scenario, *flight(scenario))

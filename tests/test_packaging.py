@@ -87,17 +87,52 @@ def test_wheel_holds_packages_data_and_marker(wheel: zipfile.ZipFile):
         "uav_formation_env/py.typed",
     ):
         assert required in names
-    # every shipped model file (package data under models/)
-    models = ROOT / "baselines" / "models"
-    for path in models.rglob("*"):
-        if path.is_file() and "__pycache__" not in path.parts:
-            assert f"uav_formation_baselines/models/{path.relative_to(models).as_posix()}" in names
+    # every shipped model's files (package data under uav_formation_env/models/<name>/)
+    models = ROOT / "uav_formation_env" / "models"
+    for path in models.glob("*/*"):
+        assert f"uav_formation_env/models/{path.relative_to(models).as_posix()}" in names
     # every module of the repository is installed: the package list in pyproject.toml is
     # explicit (package-dir needs it), so a new sub-package must be added there
     for folder, package in INSTALLED_AS.items():
         for path in (ROOT / folder).rglob("*.py"):
             installed = f"{package}/{path.relative_to(ROOT / folder).as_posix()}"
             assert installed in names, f"{installed} missing: add its package to pyproject.toml"
+
+
+MAX_WHEEL_BYTES = 3 * 2**20  # 3 MiB: the three models are 2.6 MB of it
+
+
+def test_wheel_is_small_and_ships_one_loadable_model_per_task(wheel: zipfile.ZipFile, tmp_path):
+    assert Path(wheel.filename).stat().st_size <= MAX_WHEEL_BYTES
+    names = wheel.namelist()
+    # no file that loading would unpickle or run: TorchScript, pickles, SB3 archives
+    assert not [n for n in names if n.endswith((".pt", ".pkl", ".zip", ".pth"))]
+    shipped = sorted({n.split("/")[2] for n in names if n.startswith("uav_formation_env/models/")})
+    assert shipped == ["paper_dagger", "random_fields_dagger", "random_swarm_dagger"]
+    # installed from the wheel alone, a shipped model flies by name from anywhere
+    target = tmp_path / "site"
+    wheel.extractall(target)
+    code = (
+        "import sys; from uav_formation_env.cli import main; "
+        "sys.exit(main(['evaluate', '--policy', 'paper_dagger', '--seeds', '1', "
+        "'--duration', '2', '--quiet', '--out', 'out']))"
+    )
+    env = dict(os.environ, PYTHONPATH=str(target))
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "out" / "summary.json").is_file()
+    check = "import uav_formation_env, sys; print(uav_formation_env.__file__)"
+    where = subprocess.run(
+        [sys.executable, "-c", check], cwd=tmp_path, env=env, capture_output=True, text=True
+    )
+    assert where.stdout.startswith(str(target))
 
 
 def test_wheel_metadata(wheel: zipfile.ZipFile):

@@ -30,7 +30,7 @@ from uav_formation_env.policies.shield import (
 
 U_MAX = 5.0  # [m/s^2], the scenarios' dynamics.u_max
 LOCAL_PAPER = with_overrides(resolve_scenario("paper"), {"observation": {"kind": "local"}})
-MODELS = Path(__file__).resolve().parents[1] / "baselines" / "models"
+MODELS = Path(__file__).resolve().parents[1] / "uav_formation_env" / "models"
 
 
 def local_obs(
@@ -199,11 +199,11 @@ def test_shield_keeps_a_ramming_policy_out_of_the_obstacle() -> None:
 
 def test_shield_stops_the_shipped_students_early_collisions() -> None:
     # random_fields seeds 62 and 78: the shipped student's UAVs meet within 2 m at t = 3.2 s
-    # (eval_results/random_fields_recipe6); the shielded student's do not
+    # (the records of RESULTS.md); the shielded student's do not
     pytest.importorskip("torch")
     from uav_formation_env.policies.registry import make_policy
 
-    model = MODELS / "random_fields_dagger_recipe_cpu"
+    model = MODELS / "random_fields_dagger"
     scenario = load_scenario(model / "scenario.yaml")
     student = make_policy(str(model), scenario)
     assert _fly(scenario, student, [62], 30)[0] and _fly(scenario, student, [78], 30)[0]

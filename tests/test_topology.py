@@ -19,7 +19,6 @@ from uav_formation_env.core.obstacles import (
     heading_frame,
     in_range,
     obstacle_arrays,
-    obstacle_field,
     relative_geometry,
     tangent_direction,
 )
@@ -145,22 +144,6 @@ def test_no_activation_beyond_detection_radius():
     state, out = step([(-69.0, 0.0), (-90.0, 10.0)])
     assert state.status[0, 0] == ACTIVE and out.activated[0, 0]
     assert state.activation_time[0, 0] == 10.0
-
-
-def test_activation_margin_moves_the_rules_activation_radius_only():
-    """activation_margin 50 m: a UAV 75 m from the centre (inside radius + 50, outside d^o)
-    activates; d^o itself, as the scenes and the mission metrics read it, stays 70 m."""
-    earlier = dataclasses.replace(ONE, activation_margin=50.0)
-    state, out = step([(-75.0, 0.0), (-90.0, 10.0)], avoidance=earlier)
-    assert state.status[0, 0] == ACTIVE and out.activated[0, 0]
-    state, _ = step([(-80.0, 0.0), (-90.0, 10.0)], avoidance=earlier)  # radius + 50 exactly
-    assert state.status[0, 0] == IDLE
-    assert obstacle_arrays(earlier)[2][0] == 80.0 and obstacle_arrays(ONE)[2][0] == D_O
-    # per-copy fields (the drawn scenes'): the same radii
-    assert obstacle_field([earlier, ONE]).r_detect.tolist() == [[80.0], [D_O]]
-    assert earlier.detection_margin + 30.0 == D_O
-    with pytest.raises(ValueError, match="avoidance.activation_margin"):
-        dataclasses.replace(ONE, activation_margin=10.0)  # not beyond the safety margin
 
 
 def test_no_activation_when_past_or_outside_the_strip():

@@ -19,6 +19,7 @@ from uav_formation_baselines.imitation import load_config, train_imitation  # no
 from uav_formation_env.config_io import resolve_scenario, with_overrides  # noqa: E402
 from uav_formation_env.episode import FormationEpisodes  # noqa: E402
 from uav_formation_env.policies import make_policy  # noqa: E402
+from uav_formation_env.policies.policy_file import load_policy_file  # noqa: E402
 
 # students of seconds: 2 s episodes (10 steps), one epoch, an 8-unit layer, 2 validation seeds
 TINY = [
@@ -53,14 +54,11 @@ def test_the_recipe_trains_each_seed_as_imitation_does_and_averages_the_best(
     config = load_config("paper", recipe.RECIPE, **parse_set(TINY))
     train_imitation("paper", tmp_path / "direct", config, seed=6, progress=False)
     obs = FormationEpisodes(SHORT, 2).reset(seed=[0, 1]).observation
-    np.testing.assert_array_equal(
-        _actions(members[1] / "policy.pt", obs), _actions(tmp_path / "direct" / "policy.pt", obs)
-    )
+    np.testing.assert_array_equal(_actions(members[1], obs), _actions(tmp_path / "direct", obs))
     # the ensemble's output is the mean of its members' (before act_batch bounds the action)
-    flat = torch.as_tensor(obs.reshape(-1, obs.shape[-1]))
-    with torch.no_grad():
-        mean = sum(torch.jit.load(str(Path(run) / "policy.pt"))(flat) for run in best) / 2
-        torch.testing.assert_close(torch.jit.load(str(out / "policy.pt"))(flat), mean)
+    flat = obs.reshape(-1, obs.shape[-1])
+    mean = sum(load_policy_file(run).outputs(flat) for run in best) / 2
+    np.testing.assert_allclose(load_policy_file(out).outputs(flat), mean, atol=1e-5)
 
 
 def test_a_failing_student_stops_the_recipe_with_its_seed_and_last_line(
@@ -75,7 +73,7 @@ def test_a_failing_student_stops_the_recipe_with_its_seed_and_last_line(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1
     assert err[0].startswith("error: student seed ") and "(exit 3): student " in err[0]
-    assert not (tmp_path / "ens" / "policy.pt").exists()
+    assert not (tmp_path / "ens" / "policy.json").exists()
 
 
 @pytest.mark.parametrize(

@@ -86,11 +86,10 @@ def _model_scenario(policy: str) -> str | Path:
     """The scenario a saved model was trained for: the ``scenario.yaml`` of its run directory
     (the directory itself, or the model file's), else ``"paper"``. A model must fly the scenario
     it was trained on: its observation layout and t / duration depend on it."""
-    path = Path(policy)
-    for directory in (path, path.parent):
-        if directory.is_dir() and (directory / "scenario.yaml").is_file() and path.exists():
-            return directory / "scenario.yaml"
-    return "paper"
+    from uav_formation_env.policies.registry import model_scenario
+
+    found = model_scenario(policy)
+    return "paper" if found is None else found
 
 
 def _scenario_for(args: argparse.Namespace):
@@ -212,7 +211,13 @@ def _evaluate(args: argparse.Namespace) -> int:
         options = {}
         if args.backend == "torch":
             options = {"backend": "torch", "device": torch_device(args.device)}
-        policy = make_policy(args.policy, scenario, algo=args.algo, random=args.random_source)
+        policy = make_policy(
+            args.policy,
+            scenario,
+            algo=args.algo,
+            random=args.random_source,
+            trust_pickle=args.trust_pickle,
+        )
         if args.shield:
             policy = SafetyShield(policy, scenario)
         batches = run_episode_groups(
@@ -268,7 +273,7 @@ def _render(args: argparse.Namespace) -> int:
     from uav_formation_env.render import render_episode
 
     scenario = _scenario_for(args)  # with --duration: the policy sees the episode's length
-    policy = make_policy(args.policy, scenario, algo=args.algo)
+    policy = make_policy(args.policy, scenario, algo=args.algo, trust_pickle=args.trust_pickle)
     out = Path(args.out)
     if out.is_dir():
         raise UserError(f"--out {args.out!r} is a directory; expected a .gif or .mp4 file name")
@@ -375,6 +380,10 @@ def positive_number(text: str) -> float:
     return value
 
 
+TRUST_PICKLE_HELP = (
+    "let a stable-baselines3 model read its vecnormalize.pkl: unpickling runs code from the "
+    "file, so accept this risk only for files you made yourself"
+)
 SCENARIO_HELP = f"registered name ({', '.join(SCENARIOS)}) or path of a YAML scenario"
 
 
@@ -469,6 +478,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluate.add_argument("--policy", default="lfpio", help=POLICY_HELP)
     evaluate.add_argument("--algo", default=None, help="SB3 algorithm of a model (None: try each)")
+    evaluate.add_argument("--trust-pickle", action="store_true", help=TRUST_PICKLE_HELP)
     evaluate.add_argument(
         "--observer", choices=["on", "off"], default=None, help="override the scenario's"
     )
@@ -494,6 +504,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     render.add_argument("--policy", default="lfpio", help=POLICY_HELP)
     render.add_argument("--algo", default=None, help="SB3 algorithm of a model (None: try each)")
+    render.add_argument("--trust-pickle", action="store_true", help=TRUST_PICKLE_HELP)
     render.add_argument("--scenario", default=None, help=MODEL_SCENARIO_HELP)
     render.add_argument("--seed", type=integer_at_least(0), default=0, help="episode seed")
     render.add_argument("--observer", choices=["on", "off"], default=None, help="override")

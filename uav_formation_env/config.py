@@ -249,6 +249,14 @@ class FormationConfig:
     def n_uav(self) -> int:
         return len(self.offsets)
 
+    @property
+    def slot_offsets(self) -> np.ndarray:
+        """(N, 6) the offsets z^d as the core reads them, ``a = z - z^d``: ``offsets``, negated
+        for the literal mirrored reading (``z_ij^d = z^d_j - z^d_i``), so that the core never
+        sees the flag."""
+        offsets = np.asarray(self.offsets, dtype=float)
+        return -offsets if self.mirrored_offsets else offsets
+
 
 @dataclass(frozen=True)
 class ObstacleConfig:
@@ -272,10 +280,6 @@ class AvoidanceConfig:
     obstacles: tuple[ObstacleConfig, ...] = PAPER_OBSTACLES
     safety_margin: float = 10.0  # R_s = radius + margin [m]
     detection_margin: float = 40.0  # d^o = radius + margin, from the centre [m]
-    # the topology rules activate an obstacle within radius + activation_margin of its centre;
-    # None: at d^o, as the paper (the formation avoids as soon as it detects). The mission's
-    # "obstacle met" and the scenes' placement near turns keep d^o [m]
-    activation_margin: float | None = None
     reference_speed: str = "preset"  # "preset": |v^d| of the schedule; "current": |v_guide|
     min_reference_speed: float = 15.0  # floor of the "current" option [m/s]
     # UAVs this close to an obstacle's centre line join the other side's group if that avoids a
@@ -338,13 +342,6 @@ class AvoidanceConfig:
             "avoidance.detection_margin",
             f"must exceed safety_margin ({self.safety_margin}), got {self.detection_margin}",
         )
-        if self.activation_margin is not None:
-            _require(
-                self.activation_margin > self.safety_margin,
-                "avoidance.activation_margin",
-                f"must exceed safety_margin ({self.safety_margin}) or be null, "
-                f"got {self.activation_margin!r}",
-            )
         _require(
             self.reference_speed in ("preset", "current"),
             "avoidance.reference_speed",
@@ -363,12 +360,6 @@ class AvoidanceConfig:
                     f"obstacles {a} and {b} overlap: their {circles} circles need centres "
                     f">= {reach:.1f} m apart, got {gap:.1f} m",
                 )
-
-    @property
-    def activation_distance_margin(self) -> float:
-        """Margin of the topology rules' activation radius (``activation_margin``, else
-        ``detection_margin``) [m]."""
-        return self.detection_margin if self.activation_margin is None else self.activation_margin
 
     def min_centre_distance(self, radius_a: float, radius_b: float) -> float:
         """Smallest distance between two obstacles' centres [m]: their detection circles may
@@ -721,6 +712,21 @@ class EpisodeConfig:
             "episode.start_controller",
             f"must be one of {START_CONTROLLERS}, got {self.start_controller!r}",
         )
+
+
+# The training task's scenario overrides (uav_formation_env.tasks, docs/training.md): the bounded
+# reward, the velocity action mode, the first reset spread over the mission (every rollout holds
+# every phase of it), a 150 m mission corridor (the mission allows 100 m), collisions that end
+# the episode, and the route offset in the observation.
+TRAINING_PRESET: dict[str, object] = {
+    "episode__reward": "train",
+    "episode__action": "velocity",
+    "episode__start": "staggered",
+    "episode__corridor_width": 150.0,
+    "collision__mode": "terminate",
+    "observation__route_offset": True,
+}
+REWARD_CHOICES = (None, "paper", "train")  # the ``reward`` argument of every view
 
 
 # the names of formations.SHAPES: config imports no other module of the package (the lowest

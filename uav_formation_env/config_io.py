@@ -16,7 +16,7 @@ from typing import Any, Union
 
 import yaml
 
-from uav_formation_env.config import FormationConfig, Scenario
+from uav_formation_env.config import REWARD_CHOICES, TRAINING_PRESET, FormationConfig, Scenario
 from uav_formation_env.scenarios import (
     hold_scenario,
     make_scenario,
@@ -295,3 +295,22 @@ def resolve_scenario(scenario: str | Path | Scenario | Mapping[str, Any] = "pape
         f"unknown scenario {str(scenario)!r}: expected one of {sorted(SCENARIOS)}, "
         "a path to an existing .yaml file, or a Scenario"
     )
+
+
+def resolve_with_overrides(
+    scenario: str | Path | Scenario | Mapping[str, Any], overrides: Mapping[str, Any]
+) -> Scenario:
+    """A scenario from a name / YAML path / mapping / object, with validated field overrides.
+
+    The override ``reward="train"`` puts the scenario under the training preset
+    (:data:`~uav_formation_env.config.TRAINING_PRESET`) before the others; ``reward="paper"``
+    (or None) keeps the scenario's own reward, -J_i by default.
+    """
+    overrides = dict(overrides)
+    reward = overrides.pop("reward", None)
+    if reward not in REWARD_CHOICES:
+        raise ValueError(f"reward must be one of {REWARD_CHOICES}, got {reward!r}")
+    if reward == "train":
+        overrides = {**TRAINING_PRESET, **overrides}
+    resolved = resolve_scenario(scenario)
+    return with_overrides(resolved, overrides) if overrides else resolved

@@ -171,7 +171,7 @@ def route_offsets(sim: FormationSim, result: StepResult) -> np.ndarray:
     """(B, N, 2) each UAV's horizontal offset from its slot on the preset route [m]
     (:func:`~uav_formation_env.core.reference.slot_route_offset`)."""
     positions = result.z[..., :3]
-    slots = anchored(result.z, sim.offsets, sim.scenario.formation.mirrored_offsets)[..., :3]
+    slots = anchored(result.z, sim.offsets)[..., :3]
     return slot_route_offset(sim.schedule, result.t, positions, slots, sim.route_start)
 
 
@@ -200,7 +200,6 @@ def _encode_layout(sim: FormationSim, result: StepResult) -> tuple[np.ndarray, n
             k=config.neighbours,
             m=config.obstacles,
             nearest=config.nearest,
-            mirrored=scenario.formation.mirrored_offsets,
             # the next leg's reference as it would be now (with the route-return term and the
             # corner blend's offset: a policy previews "this reference until the switch, then
             # that one", as the simulator does)
@@ -223,7 +222,6 @@ def _encode_layout(sim: FormationSim, result: StepResult) -> tuple[np.ndarray, n
         sim.obstacle_centers,
         sim.obstacle_radii,
         result.min_separation,
-        scenario.formation.mirrored_offsets,
         None if sim.obstacles is None else sim.obstacles.present,
     )
     return full, None
@@ -517,7 +515,7 @@ class FormationEpisodes:
                 noise=sim.noise_source,
             )
             self._flight.adopt(np.ones(self.batch_size, dtype=bool), self.sim)
-        flight, cfg = self._flight, self.scenario
+        flight = self._flight
         pending = starts > 0
         flight.adopt(pending, self.sim)
         result = self.sim.last
@@ -530,7 +528,6 @@ class FormationEpisodes:
                 to_numpy(last.adjacency),
                 to_numpy(flight.offsets),
                 self.u_max,
-                mirrored=cfg.formation.mirrored_offsets,
             )
             flight.step(u)
             arrived = pending & (starts == k)
@@ -583,8 +580,7 @@ class FormationEpisodes:
         xp = self.xp
         diverged = self._no_copy
         if episode.max_formation_error > 0:
-            formation = self.scenario.formation
-            a = anchored(result.z, self.sim.offsets, formation.mirrored_offsets)[..., :3]
+            a = anchored(result.z, self.sim.offsets)[..., :3]
             spread = xp.linalg.vector_norm(a - xp.mean(a, axis=1, keepdims=True), axis=-1)
             diverged = diverged | (xp.max(spread, axis=1) > episode.max_formation_error)
         if episode.max_velocity_error > 0:

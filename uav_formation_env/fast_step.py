@@ -108,7 +108,7 @@ class FastStep:
         ], dtype=float)  # fmt: skip
         radius = cfg.observation.sensing_radius
         self._finish_par = np.array([
-            cfg.duration, -1.0 if cfg.formation.mirrored_offsets else 1.0,
+            cfg.duration, 1.0,  # sim.offsets are the slots (FormationConfig.slot_offsets)
             cfg.collision.uav_distance, math.inf if radius is None else radius,
             obs_cfg.enabled, obs_cfg.estimate_without_s0,
         ], dtype=float)  # fmt: skip

@@ -4,41 +4,18 @@ Formation shapes and obstacle fields are data: every builder returns a validated
 :class:`~uav_formation_env.config.Scenario`. Random obstacle fields draw from a passed
 ``np.random.Generator``.
 
-Named scenarios of this module (registered in :data:`uav_formation_env.config_io.SCENARIOS`):
+Named scenarios of this module (registered in :data:`uav_formation_env.config_io.SCENARIOS`;
+docs/scenarios.md, "Named scenarios", describes each): ``random_fields`` (the paper with a new
+field of 1-4 obstacles each reset), ``random_routes`` (a drawn route of 3-5 legs through 2-5
+obstacles), ``random_swarm`` (N in 3..10, a drawn shape, field and wind) and ``swarm_20``,
+``swarm_50``, ``swarm_100`` (N UAVs in a 10 m grid on the paper's route, the local observation);
+``hold`` and ``track``, the lower rungs of the task ladder (:mod:`uav_formation_env.tasks`): the
+paper's formation and disturbance on a straight 60 s route, and on the paper's route, both
+without obstacles.
 
-- ``random_fields`` (:func:`random_fields_scenario`): the paper's scenario (N = 5, its V and
-  graph, its route and disturbance) with a new obstacle field each reset: 1 to 4 obstacles of
-  radius 15-35 m centred along 10-90 % of the route, at most the V's half-width (40 m) to either
-  side of it, so the preset route always passes within their detection distance and the
-  formation has to avoid each of them.
-- ``random_routes`` (:func:`random_routes_scenario`): the paper's V and graph (N = 5) on a route
-  drawn each reset (3 to 5 legs of 20 m/s, each turning by up to ±90°, leg lengths in ratios of
-  30-70 s filling the 200 s) through 2 to 5 obstacles like ``random_fields``'s, half of them
-  placed near a turn; their detection circles may overlap (only the safety circles may not);
-  the local observation, which holds the next leg.
-- ``random_swarm`` (:func:`random_swarm_scenario`): each reset draws N in 3..10, a shape of
-  :data:`~uav_formation_env.formations.SHAPES` (10 m spacing, 4-nearest graph), a field like
-  ``random_fields``'s, a constant horizontal wind of 0-0.3 m/s² in a uniform direction and
-  gusts of std 0-0.1 m/s²; the paper's route.
-- ``hold`` (:func:`hold_scenario`) and ``track`` (:func:`track_scenario`): the lower rungs of
-  the task ladder (:mod:`uav_formation_env.tasks`): the paper's formation and disturbance on a
-  straight 60 s route, and on the paper's route, both without obstacles.
-- ``swarm_20``, ``swarm_50``, ``swarm_100`` (:func:`swarm_scenario`): concrete scenarios with N
-  UAVs in a 10 m grid (a V of 100 would be 1 km wide) and a 4-nearest graph, a start box grown
-  to about (3 min_spacing)² per UAV, and the paper's two obstacles on the paper's route with
-  their radii scaled from 30 m by the grid's half-width over the V's 40 m (at least 15 m); other
-  UAVs sensed within 25 m (``observation.sensing_radius``: the pair terms are linear in N); the
-  local observation (a full one would hold 712 values per agent at N = 100, and the DMPC
-  acting on the local one took 104 ms per step at N = 100 against 276 ms on the full one).
-
-All of them but the paper's fly the avoidance rules of :data:`DRAWN_AVOIDANCE` beyond the
-paper's: obstacles activate concurrently, a done obstacle re-arms, between avoidances the
-reference leads the formation back to its preset route, near a turn an obstacle on the next
-leg activates before the turn; in the drawn scenarios (:data:`DRAWN_CORNERS`, not ``swarm_N``)
-a turn of the route also ramps over 4 s and an avoiding group keeps the route's pace
-(docs/scenarios.md, where each rule's
-effect on the reference policy is measured). The drawn scenarios' J_i has the obstacle
-clearance term of :data:`DRAWN_COST` (docs/deviations.md §8); the swarms' has not.
+All of them but the paper's fly the avoidance rules of :data:`DRAWN_AVOIDANCE` (and the drawn
+ones :data:`DRAWN_CORNERS`; docs/scenarios.md, "The shipped rules"); the drawn scenarios' J_i
+has the obstacle clearance term of :data:`DRAWN_COST` (docs/deviations.md §8).
 
 The templates (a :class:`~uav_formation_env.config.SceneConfig` in ``scene``) are concrete
 until drawn: :func:`uav_formation_env.scenes.draw_scene` gives the scenario of one reset.
@@ -220,15 +197,12 @@ def shape_formation(
 
 
 # The avoidance rules of the drawn scenarios and the swarms beyond the paper's (docs/scenarios.md):
-# obstacles activate whenever they qualify, also while another is active (random_fields seed 12
-# flew into an obstacle near a turn that waited for the previous one to be restored), a done
-# obstacle activates again when a route turn leads back to it, and between avoidances the
-# reference leads the formation back to its preset route (0.05 1/s, at most 5 m/s: of 0.05, 0.1
-# and 0.2 on random_routes seeds 0-19, 0.05 completed the most missions with the fewest colliding
-# UAV-steps), and within 5 s of a turn an obstacle just past it is judged along the next leg (a
-# 90-degree turn at 20 m/s and 5 m/s^2 per axis takes 4 s; random_fields 68 -> 83 of 100 missions
-# completed, random_swarm 78 -> 82), with sides from each UAV's chord to the next leg there (with
-# the obstacle term: random_fields 92 -> 94, random_routes 83 -> 89, random_swarm 83 -> 87)
+# obstacles activate whenever they qualify, also while another is active (an obstacle near a
+# turn must not wait for the previous one to be restored), a done obstacle activates again when
+# a route turn leads back to it, between avoidances the reference leads the formation back to
+# its preset route (0.05 1/s, at most 5 m/s), and within 5 s of a turn an obstacle just past it
+# is judged along the next leg (a 90-degree turn at 20 m/s and 5 m/s^2 per axis takes 4 s), with
+# sides from each UAV's chord to the next leg there (docs/scenarios.md, "The shipped rules")
 DRAWN_AVOIDANCE = {
     "concurrent": True,
     "rearm": True,
@@ -237,8 +211,7 @@ DRAWN_AVOIDANCE = {
     "turn_preview": 5.0,
 }
 # the drawn scenarios' only (not swarm_N's): a turn ramps over 4 s and an avoiding group keeps
-# the route's pace (at most 1.2 x |v^d|): random_fields 94 -> 96, random_swarm 87 -> 93 of 100
-# (docs/scenarios.md, "Corners and pace")
+# the route's pace (at most 1.2 x |v^d|) (docs/scenarios.md, "The shipped rules")
 DRAWN_CORNERS = {"turn_blend": 4.0, "pace_limit": 1.2}
 # J_i's obstacle clearance term (docs/deviations.md §8): 100 / m² within the 10 m safety margin,
 # over the horizon and 2 s of free flight beyond it (10 steps: the 40 m a UAV needs to stop from
@@ -328,8 +301,7 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
             base.avoidance, obstacles=obstacles, split_graph="base", **DRAWN_AVOIDANCE
         ),
         # no obstacle term (DRAWN_COST): in the 10 m grid, UAVs braking for O1 on their own
-        # (before the topology splits the grid) were run into from behind: swarm_100 seed 0 had
-        # 4 colliding UAV-steps at 10.0 s with it, 0 without (docs/scenarios.md)
+        # (before the topology splits the grid) are run into from behind (docs/scenarios.md)
         # pair terms within 25 m (2.5 spacings, about 20 UAVs of the grid): linear in N
         observation=ObservationConfig(kind="local", sensing_radius=SWARM_SENSING_RADIUS),
     )

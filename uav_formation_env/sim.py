@@ -201,7 +201,7 @@ class FormationSim:
         self.scenes: list[Scenario] = [scenario] * B  # the concrete scenario of each copy
         disturbance = scenario.disturbance
         if scenario.scene is None:
-            self.offsets = np.asarray(scenario.formation.offsets, dtype=float)  # (N, 6)
+            self.offsets = scenario.formation.slot_offsets  # (N, 6)
             self.base_adjacency = np.asarray(scenario.formation.adjacency, dtype=float)  # (N, N)
             self.obstacles: ObstacleField | None = None  # the scenario's, in every copy
             self.copy_disturbance: CopyDisturbance | None = None
@@ -325,8 +325,7 @@ class FormationSim:
             if initial.formation_jitter is None:
                 z[row, :, :3] = initial_positions(rng, N, low, high, initial.min_spacing)
             else:
-                sign = -1.0 if scene.formation.mirrored_offsets else 1.0
-                slots = sign * np.asarray(scene.formation.offsets, dtype=float)[:, :3]
+                slots = np.asarray(scene.formation.slot_offsets(), dtype=float)[:, :3]
                 centre = (low + high) / 2
                 z[row, :, :3] = formation_positions(rng, slots, centre, initial.formation_jitter)
             z[row, :, 3:] = initial.velocity
@@ -357,7 +356,7 @@ class FormationSim:
 
     def _set_scene(self, copy: int, scene: Scenario) -> None:
         """Write a drawn scene into copy ``copy``'s per-copy arrays."""
-        self.offsets[copy] = self._put(np.asarray(scene.formation.offsets, dtype=float))
+        self.offsets[copy] = self._put(scene.formation.slot_offsets)
         self.base_adjacency[copy] = self._put(np.asarray(scene.formation.adjacency, dtype=float))
         assert self.obstacles is not None and self.copy_disturbance is not None
         self.obstacles.set_copy(copy, scene.avoidance)
@@ -482,7 +481,6 @@ class FormationSim:
             out.adjacency,
             self.offsets,
             cfg.cost,
-            cfg.formation.mirrored_offsets,
             pair_distance=pair,
             obstacle_surface=obstacle_distance,
         )

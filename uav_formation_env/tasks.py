@@ -18,24 +18,13 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from uav_formation_env.config import EpisodeConfig, Scenario
+from uav_formation_env.config import TRAINING_PRESET, EpisodeConfig, Scenario
 from uav_formation_env.config_io import resolve_scenario, with_overrides
 
 __all__ = ["LADDER", "TRAINING_PRESET", "evaluation_scenario", "training_scenario"]
 
 # from easy to hard: keep the formation; the paper's route; the paper; the scene distributions
 LADDER: tuple[str, ...] = ("hold", "track", "paper", "random_fields", "random_swarm")
-
-TRAINING_PRESET: dict[str, Any] = {
-    "episode__reward": "train",
-    "episode__action": "velocity",
-    "episode__corridor_width": 150.0,  # [m]: the mission allows 100 m of route error
-    # the first reset spreads the copies over the mission (episode.start), so that every
-    # rollout holds every phase of it, not B copies of the same seconds
-    "episode__start": "staggered",
-    "collision__mode": "terminate",
-    "observation__route_offset": True,
-}
 
 
 def training_scenario(

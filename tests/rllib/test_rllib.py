@@ -62,7 +62,7 @@ def test_evaluate_from_the_exported_policy(run: Path, tmp_path: Path) -> None:
     args = [
         "evaluate",
         "--policy",
-        str(run / "policy.pt"),
+        str(run),
         "--scenario",
         str(run / "scenario.yaml"),
     ]
@@ -76,7 +76,7 @@ def test_evaluate_from_the_exported_policy(run: Path, tmp_path: Path) -> None:
 
 
 def test_training_resumes_from_the_checkpoint(run: Path) -> None:
-    before = (run / "policy.pt").read_bytes()
+    before = (run / "policy.npz").read_bytes()
     assert cli(["train", "--algo", "rllib-ppo", "--quick", "--num-cpus", "2", "--resume",
                 "--out", str(run)]) == 0  # fmt: skip
-    assert (run / "policy.pt").read_bytes() != before
+    assert (run / "policy.npz").read_bytes() != before

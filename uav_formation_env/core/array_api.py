@@ -8,7 +8,7 @@ function takes arrays, asks :func:`namespace` for their library ``xp`` and calls
 - **numpy** (the default and the only backend the base install needs). :func:`namespace` returns
   the ``numpy`` module itself: numpy >= 2.1 implements the standard's names in its main namespace,
   so the numpy path pays no wrapper (``array_api_compat.numpy`` re-exports the same functions,
-  but its lookup costs ~1 us per call, a few percent of a B = 1 step);
+  but its lookup costs time on every call);
 - **torch** on CPU or CUDA, through ``array_api_compat.torch`` (``pip install
   uav-formation-env[rl]``).
 
@@ -177,7 +177,7 @@ def move_batch_first(x: Any) -> Any:
 
 def einsum_in(xp: ModuleType, subscripts: str, *operands: Any) -> Any:
     """:func:`einsum` in a namespace the caller already has (skips the :func:`namespace` lookup:
-    measured 0.6 us of a 2.6 us call on (1, 5, 6) numpy arrays; stage_cost makes six)."""
+    stage_cost makes six calls)."""
     return einsum_function(xp)(subscripts, *operands)
 
 
@@ -321,8 +321,8 @@ def torch_device(device: Any = None) -> Any:
 
 def namespace_of(x: Any) -> ModuleType:
     """:func:`namespace` of one array, with a numpy array answered by a type test first: the
-    general lookup costs 0.3-0.5 us, and the B = 1 stage cost asks eight times (measured +13% of
-    its 40 us); anything else goes through :func:`namespace`."""
+    general lookup is slower, and the stage cost asks eight times; anything else goes through
+    :func:`namespace`."""
     if type(x) is np.ndarray:
         return np
     return namespace(x)
@@ -330,9 +330,7 @@ def namespace_of(x: Any) -> ModuleType:
 
 # Appended for the observation encoders (core/observation.py, core/local_observation.py): in-place
 # writes that the standard has no ``out=`` for. On numpy a fresh temporary of ~0.5 MB costs
-# several times the arithmetic in page faults (measured on the (1, 100, 712) full observation:
-# maximum/minimum into new arrays 675 us, in place 67 us; a subtraction into a slot view 494 us
-# through a temporary, 163 us with out=).
+# several times the arithmetic in page faults (benchmarks/bench_env.py).
 def subtract_into(out: Any, x1: Any, x2: Any) -> None:
     """``out[...] = x1 - x2`` (broadcast to ``out``'s shape), in place; on numpy without a
     temporary. ``out`` may be a view (e.g. a slice of a larger array), which is then filled."""
@@ -354,7 +352,7 @@ def clip_in_place(x: Any, low: Any, high: Any) -> None:
 
 def einsum_function(xp: ModuleType) -> Any:
     """The ``einsum`` callable of a namespace (``np.einsum`` or ``torch.einsum``), for a function
-    that makes several calls: each then pays no wrapper (:func:`einsum_in` adds 0.15 us a call)."""
+    that makes several calls: each then pays no wrapper (:func:`einsum_in` adds one)."""
     if is_numpy(xp):
         return np.einsum
     import torch
@@ -364,7 +362,7 @@ def einsum_function(xp: ModuleType) -> Any:
 
 def amin(x: Any, axis: int, keepdims: bool = False) -> Any:
     """Minimum along ``axis`` (``xp.min``): ``np.minimum.reduce`` on numpy (np.min and the
-    method add a Python layer, ~1 us of a 26 us B = 1 topology step), ``torch.amin`` on torch
+    method add a Python layer), ``torch.amin`` on torch
     (the method ``tensor.min(dim)`` returns values and indices)."""
     if isinstance(x, np.ndarray):
         return np.minimum.reduce(x, axis=axis, keepdims=keepdims)

@@ -65,7 +65,7 @@ def paper_sinusoid(t: Any, n_uav: int, amplitude: float, period: float) -> Any:
         (B, N, 3) [m/s^2] of ``t``'s library and device (a new array); odd paper UAVs (1, 3, 5)
         get the negative sign.
     """
-    # numpy and Python numbers skip the namespace look-up: 0.4 us of a 4.3 us call at B = 1
+    # numpy and Python numbers skip the namespace look-up
     xp = np if isinstance(t, _NUMPY) else namespace(t)
     return _paper_sinusoid(xp, t, n_uav, amplitude, period)
 
@@ -74,7 +74,7 @@ def _paper_sinusoid(xp: ModuleType, t: Any, n_uav: int, amplitude: float, period
     """:func:`paper_sinusoid` in the namespace ``xp`` of ``t`` that the caller already has.
 
     The numpy path names no dtype or device and converts nothing but ``t``: the generic
-    spellings cost ~0.5 us of a 4.3 us call at B = 1 (measured).
+    spellings are slower at small B).
     """
     numpy = is_numpy(xp)
     phase = 2.0 * np.pi * (np.asarray(t, dtype=float) if numpy else as_float(t)) / period
@@ -210,7 +210,7 @@ class Disturbance:
             ``(d, gust_next)``, each (B, N, 3) [m/s^2], new arrays of ``gust``'s library.
         """
         cfg = self.config
-        xp = np  # numpy skips the namespace look-up: 0.4 us of a 10 us call at B = 1
+        xp = np  # numpy skips the namespace look-up
         wind = self._wind if per_copy is None else per_copy.wind
         if not isinstance(gust, np.ndarray):  # torch: the constants and t onto gust's device
             xp = namespace(gust)

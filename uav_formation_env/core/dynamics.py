@@ -52,7 +52,7 @@ def zoh_step(z: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
     xp = namespace(z, a)
     if is_numpy(xp):
         # dp already has the broadcast shape and dtype of z and a; writing into one buffer
-        # saves the concatenation's copy (measured: 1.9 us of a 4.6 us step at B = 1)
+        # saves the concatenation's copy
         out = np.empty((*dp.shape[:-1], 6), dtype=dp.dtype)
         np.add(z[..., :3], dp, out=out[..., :3])
         np.add(z[..., 3:], dv, out=out[..., 3:])

@@ -2,66 +2,11 @@
 
 :mod:`uav_formation_env.core.observation` gives every other UAV a slot, so its length grows with N
 and a policy trained at one N cannot act at another. Here UAV i sees its own state, its ``k``
-nearest in-neighbours (then the nearest other UAVs) and its ``m`` nearest obstacles, so the
-length is ``dim = 19 + 11 (k + r) + 5 m`` (95 for the defaults k = 4, r = 2, m = 2) for any N:
-
-| slot | size | meaning | unit | scale |
-|---|---|---|---|---|
-| 0:3 | 3 | own velocity v_i | m/s | / 20 |
-| 3:6 | 3 | velocity error to the reference, v_i - v^d_i | m/s | / 20 |
-| 6:9 | 3 | reference velocity v^d_i | m/s | / 20 |
-| 9:12 | 3 | disturbance estimate d̂_i + s0_i (0 with the observer off) | m/s^2 | / 0.5 |
-| 12 | 1 | time t / duration | - | 1 |
-| 13 | 1 | 1 if the reference is an avoidance reference (held over a horizon) | - | 1, in [0, 1] |
-| 14 | 1 | distance to the nearest other UAV | m | / 100, clipped ±10 |
-| 15:18 | 3 | preset velocity of the route's next leg | m/s | / 20 |
-| 18 | 1 | time until the next leg starts | s | / 50, clipped [0, 10] |
-| n | 1 | 1 if neighbour slot s holds a UAV j | - | 1, in [0, 1] |
-| n+1 | 1 | neighbour flag h_ij (1: i receives from j, so j enters J_i) | - | 1, in [0, 1] |
-| n+2 : n+5 | 3 | relative position p_j - p_i | m | / 100, clipped ±10 |
-| n+5 : n+8 | 3 | relative formation position error (p_j - p^d_j)-(p_i - p^d_i) | m | / 50 |
-| n+8 : n+11 | 3 | relative formation velocity error (v_j-v^d_j)-(v_i-v^d_i) | m/s | / 20 |
-| o | 1 | 1 if obstacle slot q holds a (present) obstacle | - | 1, in [0, 1] |
-| o+1 : o+3 | 2 | obstacle centre minus own position, horizontal | m | / 100, clipped ±10 |
-| o+3 | 1 | obstacle radius | m | / 100, in [0, 100] |
-| o+4 | 1 | distance to the obstacle's surface (< 0 inside) | m | / 100, clipped ±10 |
-
-with n = 19 + 11 s for UAV slot s = 0..k+r-1 and o = 19 + 11 (k + r) + 5 q for obstacle slot
-q = 0..m-1 (k = 4, r = 2, m = 2: UAV slots at 19, 30, 41, 52, 63, 74; obstacle slots at 85, 90).
-
-Every other scaled value is clipped to ±100 (only reached far off course); the scales are those of
-:mod:`~uav_formation_env.core.observation`. Absent slots are all zeros.
-
-Neighbour slots (s = 0..k-1): first UAV i's in-neighbours (h_ij = 1), nearest first by
-``||p_j - p_i||``; if there are fewer than k, the nearest other UAVs follow with flag 0, since the
-separation term and collision avoidance concern every sensed UAV, not only the neighbours; slots
-beyond N - 1 are absent. With more than k in-neighbours the policy sees only the k nearest of them
-(the cost J_i still sums over all). Equal distances are broken by the lowest index j.
-
-Proximity slots (s = k..k+r-1, the same 11 values): the r nearest other UAVs that are not in a
-neighbour slot, by distance alone (their flag says whether they are in-neighbours too). A UAV
-with k or more in-neighbours would otherwise not see a non-neighbour that comes close, and the
-separation term and collision avoidance need it.
-
-With ``observation.sensing_radius`` = R the UAVs a slot can hold are UAV i's in-neighbours (whom
-it hears, wherever they are) and the UAVs within R (whom it senses), found without the N x N
-distance matrix (:mod:`~uav_formation_env.core.proximity`): the rules above applied to exactly those
-UAVs, so the fill and proximity slots stay empty when nobody else is within R, and slot 14 is then
-the clip value. The selection is the same code for both candidate sets (``_select_slots``).
-
-Backends: :func:`build_local_observations` (encoding) takes numpy arrays or torch tensors on any
-device and answers in the same library, with the same slots (ties included: numpy takes a partial
-sort, torch a stable sort); the sensed pairs of the grid are numpy only, so torch takes the
-(B, N, N) distance matrix with the sensing radius instead. The decoding side
-(:func:`decode_local_observations`, :func:`slot_frame`) is numpy only, as the policies that use it.
-
-Defaults: k = 4 because the paper's graph (``config.PAPER_ADJACENCY``) has in-degree at most 4, so
-at N = 5 every other UAV has a slot and nothing of the paper's J_i is lost; the k-nearest formation
-graphs (``formations.k_nearest_adjacency``) also use k = 4 (symmetrising can add in-neighbours, of
-which the 4 nearest are seen). r = 2: with r = 0, LFPIO acting on this layout collided UAV with
-UAV on 5 of 6 ``random_swarm`` seeds (all slots held neighbours, and a crossing non-neighbour was
-invisible); with r = 2 none did (``docs/scenarios.md``). m = 2: the obstacle being avoided and
-the next one.
+nearest in-neighbours (then the nearest other UAVs), ``r`` proximity slots and its ``m`` nearest
+obstacles, so the length is ``dim = 19 + 11 (k + r) + 5 m`` (95 for the defaults k = 4, r = 2,
+m = 2) for any N. The slot table (every slot's meaning, unit and scale) and the reasons for the
+defaults are in docs/scenarios.md, "The observation independent of N";
+:func:`decode_local_observations` is its inverse.
 """
 
 from __future__ import annotations
@@ -173,7 +118,7 @@ def _take_rows(x: Array, index: Array) -> Array:
     ``take`` (numpy's take_along_axis builds an index grid per call: ~40% of a small build);
     numpy or torch (``x.take`` is the flat take on both)."""
     n = x.shape[-1]
-    if isinstance(x, np.ndarray):  # no device lookup: 0.22 us a call, 18 calls a B = 1 build
+    if isinstance(x, np.ndarray):  # no device lookup (18 calls a build)
         rows = np.arange(0, x.size, n)
     else:
         rows = namespace_of(x).arange(0, math.prod(x.shape), n, device=device(x))
@@ -385,7 +330,6 @@ def build_local_observations(
     min_separation: Array,
     k: int = 4,
     m: int = 2,
-    mirrored: bool = False,
     next_velocity: Array | None = None,
     time_to_switch: Array | None = None,
     nearest: int = 2,
@@ -414,7 +358,6 @@ def build_local_observations(
         min_separation: (B, N) distance to the nearest other UAV [m].
         k: neighbour slots, >= 0.
         m: obstacle slots, >= 0.
-        mirrored: literal mirrored-offset reading.
         next_velocity: (B, 3) preset velocity of the route's next leg [m/s]; None: each UAV's
             current reference (no change ahead).
         time_to_switch: (B,) time until the next leg starts [s]; None: 0.
@@ -436,7 +379,7 @@ def build_local_observations(
     """
     _check_slots(k, m, nearest)
     # Methods that numpy and torch share (x.reshape(shape), the flat x.take(index)) rather than
-    # the standard's functions: numpy's function forms dispatch for 1-3 us each (measured).
+    # the standard's functions: numpy's function forms add a dispatch layer each.
     xp = namespace_of(z)
     numpy = is_numpy(xp)
     on = device(z)
@@ -479,7 +422,7 @@ def build_local_observations(
     present = neighbour_index >= 0
     safe = xp.where(present, neighbour_index, 0)
     flat = safe + (xp.arange(batch, device=on) * n_uav)[:, None, None]  # into the (B·N) rows
-    a = anchored(z, offsets, mirrored)  # (B, N, 6)
+    a = anchored(z, offsets)  # (B, N, 6)
     # a view: reshape splits raw's contiguous last axis (on both libraries)
     slots = raw[..., OWN_DIM:end].reshape((batch, n_uav, slots_count, NEIGHBOUR_DIM))
     slots[..., 0] = present

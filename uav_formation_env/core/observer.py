@@ -65,7 +65,7 @@ def observer_init(v: Any) -> ObserverState:
     if not is_numpy(xp) and xp.isdtype(v.dtype, "real floating"):
         dtype = v.dtype  # e.g. float32 on a GPU
     v_hat = xp.asarray(v, dtype=dtype, copy=True)
-    # xp.zeros, not xp.zeros_like: numpy's zeros_like costs 3x more (1.2 vs 0.4 us at B = 1)
+    # xp.zeros, not xp.zeros_like: numpy's zeros_like is slower at small B
     zeros = [xp.zeros(v_hat.shape, dtype=dtype, device=device(v_hat)) for _ in range(3)]
     return ObserverState(v_hat, *zeros)
 
@@ -150,8 +150,8 @@ def _numpy_ticks(
     """The tick loop of :func:`observer_step` on numpy, in preallocated buffers (``out=``).
 
     The same operations in the same order as the array-API loop (the same numbers, bit for bit;
-    tests/test_backend_observer.py). Kept because the fresh temporaries of the array-API loop cost
-    (measured, 20 ticks, N = 5, without numba): 279 -> 325 us at B = 1 (+16 %), ~equal at B = 256.
+    tests/test_backend_observer.py). Kept because the fresh temporaries of the array-API loop
+    cost time at small B (benchmarks/bench_sim.py).
     """
     v_hat, s0, d_hat, e_prev = (
         a.copy() for a in (state.v_hat, state.s0, state.d_hat, state.e_prev)
@@ -218,7 +218,7 @@ def observer_step_held(
     Raises:
         TypeError: ``compiled=True`` with torch inputs.
     """
-    # an isinstance test, not a namespace look-up: 0.4 us of the 8.5 us kernel step at B = 1
+    # an isinstance test, not a namespace look-up (cheaper at small B)
     use_kernel = compiled
     if compiled is None:
         use_kernel = observer_kernel.AVAILABLE and isinstance(state.v_hat, np.ndarray)

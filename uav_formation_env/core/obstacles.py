@@ -75,7 +75,7 @@ class ObstacleField:
         radii: (B, O) [m].
         r_safe: (B, O) safety radii R_s = radius + safety_margin [m].
         r_detect: (B, O) activation radii of the topology rules: radius + the avoidance's
-            ``activation_distance_margin`` (d^o = radius + detection_margin by default) [m].
+            ``detection_margin`` (d^o = radius + detection_margin) [m].
         present: (B, O) bool, real obstacles.
     """
 
@@ -106,7 +106,7 @@ class ObstacleField:
             self.centres[copy, :n] = xp.asarray(centres, dtype=self.centres.dtype, device=at)
             self.radii[copy, :n] = xp.asarray(radii, dtype=self.radii.dtype, device=at)
         self.r_safe[copy] = self.radii[copy] + avoidance.safety_margin
-        self.r_detect[copy] = self.radii[copy] + avoidance.activation_distance_margin
+        self.r_detect[copy] = self.radii[copy] + avoidance.detection_margin
 
     def take(self, mask: Any, source: ObstacleField) -> None:
         """Copy the ``mask`` copies' rows of ``source`` (same library and device) into this field
@@ -173,7 +173,7 @@ def obstacle_arrays(avoidance: AvoidanceConfig) -> tuple[np.ndarray, np.ndarray,
 
     Returns:
         centres (O, 2) [m], safety radii R_s = radius + safety_margin (O,) [m] and activation
-        radii (d^o = radius + detection_margin unless ``activation_margin`` is set) (O,) [m], both
+        radii (d^o = radius + detection_margin) (O,) [m], both
         measured from the centre. The arrays are
         shared between calls and read-only.
     """
@@ -183,7 +183,7 @@ def obstacle_arrays(avoidance: AvoidanceConfig) -> tuple[np.ndarray, np.ndarray,
     arrays = (
         centres,
         radii + avoidance.safety_margin,
-        radii + avoidance.activation_distance_margin,
+        radii + avoidance.detection_margin,
     )
     for array in arrays:
         array.flags.writeable = False

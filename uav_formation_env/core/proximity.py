@@ -49,9 +49,8 @@ _MAX_COPIES = 1 << (63 - 2 * _CELL_BITS)  # copies per key space (the copy in th
 _AROUND = np.array([(dx, dy) for dx in (-1, 0, 1) for dy in (-1, 0, 1)], dtype=np.int64)
 
 
-# below this N the (B, N, N) distance matrix is cheaper than the grid (measured: at N = 5 the
-# grid's ~30 small array operations took 97 us against 9 us at B = 1, and 909 against 128 us
-# at B = 256; the grid won from N = 100 at B = 256); both give the same pairs within R
+# below this N the (B, N, N) distance matrix is cheaper than the grid's ~30 small array
+# operations (benchmarks/bench_scale.py); both give the same pairs within R
 GRID_MIN_UAVS = 64
 
 
@@ -83,7 +82,7 @@ def nearest_distance(pairs: np.ndarray | SensedPairs, radius: float | None) -> n
     if isinstance(pairs, SensedPairs):
         return pairs.nearest()
     xp = namespace_of(pairs)
-    # np.min wraps this ufunc reduction in 1.4 us of Python (measured on (1, 5, 5))
+    # np.min wraps this ufunc reduction in a Python layer
     nearest = np.minimum.reduce(pairs, axis=-1) if is_numpy(xp) else xp.min(pairs, axis=-1)
     return nearest if radius is None else xp.where(nearest <= radius, nearest, math.inf)
 

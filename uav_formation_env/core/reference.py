@@ -282,7 +282,7 @@ def blended_velocity(schedule: Schedule, t: Any, blend: float) -> Any:
     ends h late and the distance flown is the same: the route point is reached again at
     ``t_s + h``. A switch of eq. 23 asks for an infinite acceleration; a 90-degree turn at
     20 m/s with 5 m/s^2 per axis takes 4 s, and a formation tracking the sharp switch overshoots
-    the corner by 30-60 m (docs/scenarios.md, "Corners and pace"; the drawn scenarios
+    the corner by 30-60 m (docs/scenarios.md, "The shipped rules"; the drawn scenarios
     blend over 4 s). ``blend = 0`` is
     :func:`preset_velocity` itself.
 

@@ -1,80 +1,17 @@
 """Obstacle avoidance with topology reconstruction (docs/model.md §7), batched, on numpy arrays or
 torch tensors (CPU or CUDA; core/array_api.py).
 
-Every function here is pure: it takes arrays with a leading batch axis B (scenario copies) and
-returns new arrays; nothing is stored between calls and nothing is random. Shapes: B copies,
-O obstacles, N UAVs. Geometry (see :mod:`uav_formation_env.core.obstacles`) is horizontal; the
-obstacles are infinite vertical cylinders with safety radius R_s = radius + safety_margin and
-detection radius d^o = radius + detection_margin, both from the centre (40 m and 70 m for the
-paper). ê is the horizontal direction of the preset velocity at the current time, n̂ = ê rotated
-+90°, λ_lon = (p - o)·ê, λ_lat = (p - o)·n̂, D = ||p_xy - o||; "in range" is |λ_lat| < R_s and
-λ_lon < 0.
+Every function here is pure: arrays with a leading batch axis B (scenario copies) in, new arrays
+out; nothing is stored between calls and nothing is random. Per copy, each obstacle goes idle ->
+active -> done (with ``avoidance.rearm`` a done obstacle can activate again). One
+:func:`update_topology` call runs three phases: activation (an obstacle in range of the
+formation activates and fixes every UAV's side), guides and ends (each side's group follows the
+member that needs the largest turn, until none of its members is in range), and outputs (the
+split graph H and the tangent reference v^d of the avoiding UAVs).
 
-Per copy, each obstacle goes idle (0) -> active (1) -> done (2), once (with ``avoidance.rearm``
-a done obstacle activates again, like an idle one, when the rule of phase 1 holds again: after a
-turn of the route the formation can come back into its range). One :func:`update_topology`
-call runs three phases in this order:
-
-1. **Activation.** An idle obstacle is a candidate when at least one UAV is in range and
-   min_i D_i < d^o (both swarm-wide: the UAV in range need not be the nearest one). With
-   ``avoidance.turn_preview`` (T_p > 0), within T_p of a turn of the route the same test is also
-   made along the next leg for the UAVs moved to where they will be at the turn (p + v^d times
-   the time left), and its groups' members are in range while either test holds; any obstacle
-   that activates within that window takes its sides from each UAV's chord to the next leg, so
-   that an obstacle at a corner is passed on the inside of the bend (:func:`_turn_geometry`).
-   At most one obstacle is active per copy: candidates wait while another obstacle is active,
-   and an obstacle restored in this update frees the copy only from the next update on. If
-   several obstacles are candidates at once, the one with the smallest min_i D_i wins (ties:
-   lowest index). With ``avoidance.concurrent`` every candidate activates, whatever else is
-   active (the joint rule of :func:`_avoidance_output`). At activation every UAV gets its side
-   s_i = +1 if λ_lat >= 0 else -1 (λ in the chord's frame within a turn-preview window), fixed
-   until the obstacle is done: +1 passes with the obstacle on the right (clockwise round it).
-   Case 1 (all sides equal): one group. Case 2: Σ+ and Σ-.
-2. **Guides and ends.** Group slot 0 holds side +1, slot 1 side -1 (in case 1 the unused slot is
-   empty). Every update, a group's guide is its in-range member that needs the largest turn
-   towards the group's side to clear the safety circle (the signed angle from ê to the member's
-   own tangent direction; ties: lowest index). This deviates from docs/model.md §7's "innermost,
-   chosen
-   once" (see docs/deviations.md): it reduces to the innermost member for members abreast of
-   each other, but when the V is stretched along the track (heading +y at O2) a member ahead
-   at nearly the same lateral offset needs more turn than the innermost one behind it, and the
-   fixed innermost guide brought that member to 26 m of the centre in the heuristic's runs.
-   A group has ended while none of its members is in range (all abreast or laterally outside the
-   strip, where going straight along ê cannot enter the safety circle); it resumes if a member
-   comes back into range. When every group has ended: status -> done, H <- H0, references <-
-   schedule (``restored`` is True in that update).
-3. **Outputs.** While an obstacle is active: H = complete graph inside each side, no edges across
-   (case 1: the complete graph); ``groups`` = 0 for side +1 and 1 for side -1 in case 2, else 0.
-   Members of a group with a guide that has not ended follow v^d = V_ref·l/||l|| (horizontal,
-   v_z^d = 0), with l the tangent from the guide's current position to the safety circle on the
-   group's side (:func:`~uav_formation_env.core.obstacles.tangent_direction`); they are flagged
-   ``avoiding`` and should hold this reference over the whole MPC horizon (see
-   :func:`reference_preview`). Everyone else follows the preset velocity, but keeps the split
-   adjacency until the restore. V_ref = ||preset velocity|| (``reference_speed="preset"``) or
-   max(||v_guide||, min_reference_speed) (``"current"``); with ``pace_limit`` > 1 it is divided
-   by cos θ (θ the tangent's angle to the preset direction), up to ``pace_limit`` x V_ref, so
-   the group keeps the route point's pace along the route (docs/scenarios.md, "Corners and
-   pace").
-
-Further decisions:
-
-- ê is re-evaluated every update from the schedule, so a preset turn during an active avoidance
-  changes λ_lon (and so the abreast test) but never the sides fixed at activation. If the preset
-  velocity has no horizontal part, ê = 0: no UAV is in range and an active obstacle's guided
-  groups end at once.
-- :func:`preset_velocity` treats t within 1e-9 s of a switching time as equal to it, so that
-  t = k·dt accumulated in floating point switches at the intended step.
-- Only the positions' x, y enter the geometry (z plays no role); the ``"current"`` reference
-  speed uses the guide's full 3-D speed.
-- The returned state never shares memory with the input state. Beyond the fields the API asks
-  for, the state records ``activation_time`` / ``restore_time`` and the output carries
-  ``active_obstacle``.
-- Backends: the state, the inputs and a per-copy :class:`ObstacleField` / :class:`CopySchedules`
-  are all numpy or all torch on one device (``init_topology(..., like=)`` makes a torch state);
-  the configuration's cached numpy arrays (obstacles, schedule) are converted to that device.
-  The fast exits test ``.any()`` on the host (a device sync per step on CUDA). Sums and
-  boolean reductions are spelled as methods (``x.sum(axis=...)``, ``x.any(axis=...)``), which
-  both libraries take: ``np.sum`` and ``np.any`` add ~1 us each to a 26 us B = 1 step.
+The full specification (geometry, tie rules, turn preview, chord sides, pace keeping, backends)
+is docs/reference_policy.md, "Topology reconstruction"; docs/deviations.md says where it departs
+from the paper.
 """
 
 from __future__ import annotations
@@ -240,7 +177,7 @@ def reset_topology(state: TopologyState, mask: Any) -> TopologyState:
 
 
 def _copy_state(state: TopologyState) -> TopologyState:
-    # one type test for the seven fields (the shim's copy() per field: +0.5 us of a 24 us step)
+    # one type test for the seven fields (not the shim's copy() per field)
     clone = np.ndarray.copy if isinstance(state.status, np.ndarray) else copy
     return TopologyState(*(clone(getattr(state, name)) for name in _STATE_FIELDS))
 
@@ -288,25 +225,11 @@ def update_topology(
         The new state and this step's outputs.
     """
     xp = namespace_of(positions)
-    if is_numpy(xp):  # the conversions without the shim's calls: 0.4 us of a 24 us B = 1 step
-        positions, velocities = np.asarray(positions, dtype=float), np.asarray(velocities, float)
-        t, h0 = np.asarray(t, dtype=float), np.asarray(base_adjacency, dtype=float)
-    else:
-        positions = as_float(positions)
-        velocities, t = as_float(velocities, like=positions), as_float(t, like=positions)
-        h0 = as_float(base_adjacency, like=positions)
+    positions, velocities, t, h0 = _checked_inputs(
+        xp, state, positions, velocities, t, base_adjacency, avoidance, obstacles
+    )
     batch, n_uav = positions.shape[:2]
     n_obs = state.status.shape[1]
-    if state.side.shape != (batch, n_obs, n_uav) or velocities.shape != positions.shape:
-        raise ValueError(
-            f"shape mismatch: state side {tuple(state.side.shape)}, positions "
-            f"{tuple(positions.shape)}, velocities {tuple(velocities.shape)}"
-        )
-    n_config = len(avoidance.obstacles) if obstacles is None else obstacles.count
-    if n_obs != n_config:
-        raise ValueError(f"state has {n_obs} obstacles, the obstacle field has {n_config}")
-    if t.shape != (batch,):
-        t = xp.broadcast_to(t, (batch,))
     preset = preset_velocity(schedule, t)  # (B, 3): the track frame and the turn window
     # the reference outside an avoidance: the preset velocity, its corners blended, plus the
     # route return
@@ -317,17 +240,8 @@ def update_topology(
     if n_obs == 0:
         return state, _idle_output(xp, base, h0, batch, n_uav, n_obs, correction)
 
-    if obstacles is None:  # one field for every copy: (O,) radii broadcast as (O, 1, 1)
-        centres, r_safe, r_detect = obstacle_arrays(avoidance)
-        r_detect_sq, present = detection_sq(avoidance), True
-        if not is_numpy(xp):  # the cached numpy constants on the positions' device
-            fixed = (centres, r_safe, r_detect, r_detect_sq)
-            centres, r_safe, r_detect, r_detect_sq = (constant_like(c, positions) for c in fixed)
-        fast_centres, r_safe_b, r_detect_b = centres, r_safe[:, None, None], r_detect[:, None]
-    else:  # per copy: batch-last (O, 1, B) and (O, B)
-        centres, r_detect_sq = obstacles.centres, obstacles.r_detect**2
-        fast_centres, present = centres[:, None], obstacles.present.T
-        r_safe_b, r_detect_b = obstacles.r_safe.T[:, None, :], obstacles.r_detect.T
+    field = _field_arrays(xp, avoidance, obstacles, positions)
+    centres, r_safe, r_detect_sq, present, fast_centres, r_safe_b, r_detect_b = field
     turn = _turn_geometry(avoidance, schedule, t, positions, preset, centres, r_safe_b)
     if turn is None and not (state.status == ACTIVE).any():
         # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
@@ -346,7 +260,6 @@ def update_topology(
     near = in_range(lon, lat, r_safe_b)
     if turn is not None:  # in range along the next leg, from the positions at the turn
         near_turn, dist_turn, chord_lat, window = turn
-    slot_sides = constant_like(_SLOT_SIDES, positions)
 
     status = move_batch_last(state.status)  # (O, B), modified in place below
     side = move_batch_last(state.side)  # (O, N, B)
@@ -356,24 +269,15 @@ def update_topology(
     activation_time = move_batch_last(state.activation_time)
     restore_time = move_batch_last(state.restore_time)
 
-    # 1. activation: every candidate when concurrent; else at most one active obstacle per copy,
-    # the nearest candidate wins
+    # 1. activation
     min_dist = amin(dist, axis=1)  # (O, B)
-    armed = _armed(status, avoidance.rearm)  # (O, B)
     candidate = near.any(axis=1) & (min_dist < r_detect_b)
     side_lat = lat
     if turn is not None:  # also met along the next leg; near a turn, sides from the chords
         by_turn = near_turn.any(axis=1) & (amin(dist_turn, axis=1) < r_detect_b)
         candidate = candidate | by_turn
         side_lat = xp.where(window, chord_lat, lat)
-    candidate = candidate & armed & present
-    if avoidance.concurrent:
-        activated = candidate
-    else:
-        candidate &= ~(status == ACTIVE).any(axis=0)  # a busy copy waits
-        chosen = _first_argmin(xp.where(candidate, min_dist, math.inf), axis=0)  # (B,)
-        obs_index = xp.arange(n_obs, device=device(positions))[:, None]
-        activated = candidate & (obs_index == chosen)  # (O, B)
+    activated = _activated(xp, candidate & present, status, min_dist, avoidance, positions)
     if activated.any():
         new_side, one_group = choose_sides(side_lat, avoidance.split_deadband)
         side = xp.where(activated[:, None], new_side, side)
@@ -383,21 +287,13 @@ def update_topology(
         activation_time = xp.where(activated, t, activation_time)
         status[activated] = ACTIVE
 
-    # 2. guides (re-chosen every step: the in-range member needing the largest deflection) and
-    # ends (no member left in range)
+    # 2. guides and ends
     active = status == ACTIVE  # (O, B)
     if active.any():
-        member = side[:, None] == slot_sides[:, None, None]  # (O, 2, N, B)
-        # in range along the current leg or, near a turn, along the next one; every member's
-        # turn is measured from the current heading (one frame: measured from different
-        # headings, the turns of two members are not comparable)
-        eligible = member & (near if turn is None else near | near_turn)[:, None]
-        r_safe_d = r_safe if obstacles is None else r_safe_b
-        demand = deflection_demand(rel_x, rel_y, dist, r_safe_d, e_hat, slot_sides)  # (O,2,N,B)
-        best = _first_argmin(xp.where(eligible, -demand, math.inf), axis=2)  # (O, 2, B)
-        has_guide = eligible.any(axis=2)
-        guide = xp.where(active[:, None], xp.where(has_guide, best, -1), guide)
-        ended = xp.where(active[:, None], ~has_guide, ended)
+        # in range along the current leg or, near a turn, along the next one
+        eligible = near if turn is None else near | near_turn
+        geometry = (rel_x, rel_y, dist, r_safe if obstacles is None else r_safe_b, e_hat)
+        guide, ended = _guides_and_ends(xp, active, side, eligible, geometry, guide, ended)
     restored = active & ended.all(axis=1)  # (O, B)
     if restored.any():
         status[restored] = DONE
@@ -415,8 +311,8 @@ def update_topology(
     if correction is not None:
         # no route return while an avoidance runs in the copy (the UAVs that are not guided, a
         # group that has passed, would be pulled back towards the obstacle's line) nor while a
-        # UAV is within an obstacle's detection circle (random_routes seed 15: pulled back onto
-        # the route, the formation met the next obstacle too late to turn away)
+        # UAV is within an obstacle's detection circle (pulled back onto the route, a formation
+        # can meet the next obstacle too late to turn away)
         detected = ((min_dist < r_detect_b) & present).any(axis=0)  # (B,)
         busy = (status == ACTIVE).any(axis=0) | detected
         correction = xp.where(busy[:, None], 0.0, correction)
@@ -431,6 +327,113 @@ def update_topology(
             output, active, side, guide, ended, case, geometry, velocities, preset, avoidance
         )
     return new_state, output
+
+
+def _checked_inputs(
+    xp: Any,
+    state: TopologyState,
+    positions: Any,
+    velocities: Any,
+    t: Any,
+    base_adjacency: Any,
+    avoidance: AvoidanceConfig,
+    obstacles: ObstacleField | None,
+) -> tuple[Any, Any, Any, Any]:
+    """(positions, velocities, t (B,), H0) as float arrays of ``xp``; a ``ValueError`` naming
+    the shapes that do not fit ``state``."""
+    if is_numpy(xp):  # the conversions without the shim's calls
+        positions, velocities = np.asarray(positions, dtype=float), np.asarray(velocities, float)
+        t, h0 = np.asarray(t, dtype=float), np.asarray(base_adjacency, dtype=float)
+    else:
+        positions = as_float(positions)
+        velocities, t = as_float(velocities, like=positions), as_float(t, like=positions)
+        h0 = as_float(base_adjacency, like=positions)
+    batch, n_uav = positions.shape[:2]
+    n_obs = state.status.shape[1]
+    if state.side.shape != (batch, n_obs, n_uav) or velocities.shape != positions.shape:
+        raise ValueError(
+            f"shape mismatch: state side {tuple(state.side.shape)}, positions "
+            f"{tuple(positions.shape)}, velocities {tuple(velocities.shape)}"
+        )
+    n_config = len(avoidance.obstacles) if obstacles is None else obstacles.count
+    if n_obs != n_config:
+        raise ValueError(f"state has {n_obs} obstacles, the obstacle field has {n_config}")
+    if t.shape != (batch,):
+        t = xp.broadcast_to(t, (batch,))
+    return positions, velocities, t, h0
+
+
+def _field_arrays(
+    xp: Any, avoidance: AvoidanceConfig, obstacles: ObstacleField | None, positions: Any
+) -> tuple[Any, ...]:
+    """(centres, r_safe, r_detect², present, centres for the fast exit, r_safe and r_detect
+    batch-last): one field for every copy ((O,) radii broadcast as (O, 1, 1)) or per copy
+    ((O, 1, B) and (O, B))."""
+    if obstacles is None:
+        centres, r_safe, r_detect = obstacle_arrays(avoidance)
+        r_detect_sq, present = detection_sq(avoidance), True
+        if not is_numpy(xp):  # the cached numpy constants on the positions' device
+            fixed = (centres, r_safe, r_detect, r_detect_sq)
+            centres, r_safe, r_detect, r_detect_sq = (constant_like(c, positions) for c in fixed)
+        return (
+            centres,
+            r_safe,
+            r_detect_sq,
+            present,
+            centres,
+            r_safe[:, None, None],
+            r_detect[:, None],
+        )
+    centres, r_detect_sq = obstacles.centres, obstacles.r_detect**2
+    r_safe_b = obstacles.r_safe.T[:, None, :]
+    return (
+        centres,
+        None,
+        r_detect_sq,
+        obstacles.present.T,
+        centres[:, None],
+        r_safe_b,
+        obstacles.r_detect.T,
+    )
+
+
+def _activated(
+    xp: Any, candidate: Any, status: Any, min_dist: Any, avoidance: AvoidanceConfig, like: Any
+) -> Any:
+    """(O, B) the obstacles that activate: every armed candidate when ``concurrent``; else at
+    most one per copy, none in a busy copy, the nearest candidate (ties: lowest index)."""
+    candidate = candidate & _armed(status, avoidance.rearm)
+    if avoidance.concurrent:
+        return candidate
+    candidate &= ~(status == ACTIVE).any(axis=0)  # a busy copy waits
+    chosen = _first_argmin(xp.where(candidate, min_dist, math.inf), axis=0)  # (B,)
+    obs_index = xp.arange(status.shape[0], device=device(like))[:, None]
+    return candidate & (obs_index == chosen)  # (O, B)
+
+
+def _guides_and_ends(
+    xp: Any,
+    active: Any,
+    side: Any,
+    eligible: Any,
+    geometry: tuple[Any, ...],
+    guide: Any,
+    ended: Any,
+) -> tuple[Any, Any]:
+    """Each active obstacle's group guides, re-chosen every step: the eligible (in-range)
+    member needing the largest deflection; a group without one has ended. (O, 2, B) each.
+    Every member's turn is measured from the current heading (one frame: measured from
+    different headings, the turns of two members are not comparable)."""
+    rel_x, rel_y, dist, r_safe, e_hat = geometry
+    slot_sides = constant_like(_SLOT_SIDES, dist)
+    member = side[:, None] == slot_sides[:, None, None]  # (O, 2, N, B)
+    eligible = member & eligible[:, None]
+    demand = deflection_demand(rel_x, rel_y, dist, r_safe, e_hat, slot_sides)  # (O, 2, N, B)
+    best = _first_argmin(xp.where(eligible, -demand, math.inf), axis=2)  # (O, 2, B)
+    has_guide = eligible.any(axis=2)
+    guide = xp.where(active[:, None], xp.where(has_guide, best, -1), guide)
+    ended = xp.where(active[:, None], ~has_guide, ended)
+    return guide, ended
 
 
 def _turn_geometry(
@@ -456,7 +459,7 @@ def _turn_geometry(
     the way the UAV would cut the corner. λ^c = (p - o)·n̂_c, with n̂_c the chord's direction
     rotated +90°, is then used as λ_lat. Judged along either leg alone, an obstacle in the corner
     sends (part of) the formation round the outside of the bend, and it loops back to the next
-    leg 180-230 m behind the route point (`random_swarm` seeds 38, 57, 87; docs/scenarios.md).
+    leg far behind the route point (docs/scenarios.md).
 
     Args:
         avoidance: ``turn_preview`` [s].
@@ -494,8 +497,8 @@ def _turn_geometry(
     length = xp.maximum(xp.sqrt(chord_x**2 + chord_y**2), _CHORD_EPS)
     chord_lat = (now_y * chord_x - now_x * chord_y) / length  # (p - o)·n̂_c
     # an obstacle whose safety circle ends before the turn point is passed on the current leg:
-    # its chord runs along ê, λ^c = λ_lat (random_fields seed 48: O1 45 m before the turn, the
-    # chord to the next leg sent the 80 m wide formation round its inside, 107 m off the route)
+    # its chord runs along ê, λ^c = λ_lat (the chord to the next leg would send a wide
+    # formation round its inside, far off the route)
     to_turn = xp.sqrt(preset[:, 0] ** 2 + preset[:, 1] ** 2) * wait  # (m - p)·ê, (B,) [m]
     before_turn = lon_now + to_turn >= r_safe
     return near, dist, xp.where(before_turn, lat_now, chord_lat), window
@@ -503,7 +506,7 @@ def _turn_geometry(
 
 def _armed(status: Any, rearm: bool) -> Any:
     """Obstacles that may activate: idle ones, and done ones with ``rearm`` (same shape as
-    ``status``, bool). The done test only when rearmed: ~1 us of a 24 us B = 1 step."""
+    ``status``, bool). The done test only when rearmed."""
     armed = status == IDLE
     return armed | (status == DONE) if rearm else armed
 

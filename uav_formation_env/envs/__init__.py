@@ -10,32 +10,10 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.config_io import resolve_scenario, with_overrides
+from uav_formation_env.config_io import resolve_with_overrides
 from uav_formation_env.envs.aec import UAVFormationAECEnv
 from uav_formation_env.envs.parallel import UAVFormationParallelEnv
 from uav_formation_env.extras import require
-from uav_formation_env.tasks import TRAINING_PRESET
-
-REWARD_CHOICES = (None, "paper", "train")  # the ``reward`` argument of every view
-
-
-def resolve_with_overrides(
-    scenario: str | Path | Scenario | Mapping[str, Any], overrides: Mapping[str, Any]
-) -> Scenario:
-    """A scenario from a name / YAML path / mapping / object, with validated field overrides.
-
-    The override ``reward="train"`` puts the scenario under the training preset
-    (:data:`uav_formation_env.tasks.TRAINING_PRESET`) before the others; ``reward="paper"`` (or
-    None) keeps the scenario's own reward, -J_i by default.
-    """
-    overrides = dict(overrides)
-    reward = overrides.pop("reward", None)
-    if reward not in REWARD_CHOICES:
-        raise ValueError(f"reward must be one of {REWARD_CHOICES}, got {reward!r}")
-    resolved = resolve_scenario(scenario)
-    if reward == "train":
-        overrides = {**TRAINING_PRESET, **overrides}
-    return with_overrides(resolved, overrides) if overrides else resolved
 
 
 def parallel_env(

@@ -35,7 +35,7 @@ class FormationGymEnv(gymnasium.Env):
     def __init__(
         self, scenario: str | Scenario = "paper", render_mode: str | None = None, **overrides: Any
     ) -> None:
-        from uav_formation_env.envs import resolve_with_overrides
+        from uav_formation_env.config_io import resolve_with_overrides
 
         self.parallel = UAVFormationParallelEnv(
             resolve_with_overrides(scenario, overrides), render_mode=render_mode

@@ -53,7 +53,7 @@ class _BatchedView(gymnasium.vector.VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
     def __init__(self, copies: int, scenario: ScenarioLike, overrides: Mapping[str, Any]) -> None:
-        from uav_formation_env.envs import resolve_with_overrides
+        from uav_formation_env.config_io import resolve_with_overrides
 
         if isinstance(copies, bool) or not isinstance(copies, int | np.integer) or copies < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {copies!r}")

@@ -31,12 +31,12 @@ def formation_rmse(batch: EpisodeBatch) -> np.ndarray:
     """(B,) RMS over steps and UAVs of each UAV's position error from its formation slot [m]."""
     cfg = batch.scenario.formation
     if batch.scenes is None:
-        offsets = np.asarray(cfg.offsets, dtype=float)  # (N, 6)
+        offsets = cfg.slot_offsets  # (N, 6)
     else:  # each seed's drawn formation, (B, N, 6)
-        offsets = np.stack([np.asarray(s.formation.offsets, dtype=float) for s in batch.scenes])
+        offsets = np.stack([s.formation.slot_offsets for s in batch.scenes])
     # anchored() takes (B, N, *extra, 6): seeds first, then UAVs, then the time steps
     z = batch.z.transpose(1, 2, 0, 3)
-    a = anchored(z, offsets if offsets.ndim == 3 else offsets[None], cfg.mirrored_offsets)
+    a = anchored(z, offsets if offsets.ndim == 3 else offsets[None])
     a = a[..., :3].transpose(2, 0, 1, 3)  # (T+1, B, N, 3)
     e = a - a.mean(axis=2, keepdims=True)
     return np.sqrt((e**2).sum(axis=-1).mean(axis=(0, 2)))
@@ -103,7 +103,37 @@ def mission_of(batch: EpisodeBatch) -> MissionMetrics:
 
 
 def summarise(batch: EpisodeBatch) -> dict[str, Any]:
-    """The metrics of the module docstring as a JSON-ready dict."""
+    """The metrics of ``batch`` as a JSON-ready dict, each per seed and then the mean over seeds
+    unless stated:
+
+    - ``triggers_per_uav``: event-triggered steps per UAV (DMPC policies only, else null);
+    - ``realised_cost_per_uav``: Σ over the episode of UAV i's stage cost J_i (the env's -reward);
+    - ``formation_rmse_m``: RMS over steps and UAVs of ``||e_i||``, with ``e_i = a_i - mean_j a_j``
+      the position error of UAV i from its slot in the formation anchored at the swarm's mean
+      (``a = p - p^d``); it includes the deliberate splits at obstacles and the start transient;
+    - ``min_obstacle_surface_distance_m`` / ``min_obstacle_center_distance_m``: minimum over seeds,
+      steps and UAVs (negative surface distance = inside an obstacle);
+    - ``min_separation_m``: minimum distance between two UAVs over seeds and steps;
+    - ``collisions``: UAV-steps flagged as collisions, summed over seeds (the runner never ends an
+      episode early, whatever ``collision.mode`` says); ``collision_time_range_s`` the first and
+      last time of one;
+    - ``observer_rms_error``: RMS of ``estimate - d`` over steps with t > 10 s, UAVs and axes (the
+      estimate after a step against the disturbance held over that step); null without observer
+      (or for episodes that end before 10 s);
+    - ``events``: activation (topology change: split in case 2) and restore time of each obstacle;
+    - ``optimiser_cost_ratio_median``: median over triggered UAV-steps of J_exec / J_pre, how far
+      the optimiser lowered J_i below the warm start's (DMPC policies only, else null);
+    - ``mission``: the mission metrics of :mod:`~uav_formation_env.evaluation.mission` (route
+      error against the preset route, velocity-tracking RMSE, obstacles met, collisions and minimum
+      separation after t = 0, completion rate and every failure with its seed and cause), always
+      beside the cost: J_i tracks velocity, not position, so a cheap policy can leave the route;
+    - ``realised_cost_ci95``: half-width of the 95 % confidence interval of the mean over seeds;
+    - ``realised_cost_terms``: the realised J per UAV split into J_i's terms (formation, energy,
+      terminal, velocity, separation, obstacle), which add up to ``realised_cost_mean``: where a
+      policy's cost goes (``uav-formation evaluate`` prints them as "by term");
+    - ``wall_time_per_step_s``: wall time of one batched control step (policy + simulation), and the
+      same divided by the number of seeds.
+    """
     realised = batch.stage_cost.sum(axis=0)  # (B, N)
     _, cost_ci95 = mean_ci95(realised.mean(axis=1))
     returns = batch.reward.sum(axis=0).mean(axis=1)  # (B,) per UAV

@@ -19,7 +19,7 @@ from uav_formation_env.core.topology import obstacle_distances
 from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.policies.broadcast import input_half_width
 from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
-from uav_formation_env.policies.registry import BatchPolicy
+from uav_formation_env.policies.protocol import BatchPolicy, as_batch_policy
 from uav_formation_env.scenes import seeds_by_n_uav
 from uav_formation_env.seeding import check_seed
 
@@ -184,10 +184,10 @@ def run_episodes(
         backend=backend,
         device=device,
     )
-    tensors = backend != "numpy" and getattr(policy, "accepts_tensors", False)
+    policy = as_batch_policy(policy)
+    tensors = backend != "numpy" and policy.accepts_tensors
     sim, n_uav = episodes.sim, episodes.n_uav
-    if hasattr(policy, "reset"):
-        policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
+    policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
     start = time.perf_counter()
     step = episodes.reset(seed=seeds)
     result, obs = step.result, step.observation
@@ -196,8 +196,8 @@ def run_episodes(
         distance = to_numpy(obstacle_distances(z[..., :3], sim.field))
         return distance.min(axis=1, initial=np.inf)
 
-    states = [_state_record(result, centre_min)]
-    steps: list[tuple] = []
+    recorder = _Recorder(centre_min)
+    recorder.state(result)
     policy_seconds = np.zeros(n_steps)
     sim_seconds = np.zeros(n_steps)
     gaps: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -206,7 +206,7 @@ def run_episodes(
     callback = progress if callable(progress) else None
     if progress is True:
         bar = tqdm(total=n_steps, desc=desc or policy_name or "episodes", unit="step")
-    links = getattr(policy, "needs_neighbour_index", False)
+    links = policy.needs_neighbour_index
     for k in range(n_steps):
         t0 = time.perf_counter()
         seen = obs if tensors else to_numpy(obs)
@@ -232,18 +232,8 @@ def run_episodes(
         result, obs = step.result, step.observation
         policy_seconds[k] = t1 - t0
         sim_seconds[k] = time.perf_counter() - t_sim
-        states.append(_state_record(result, centre_min))
-        steps.append(
-            (
-                to_numpy(result.u_n),
-                to_numpy(result.u_applied),
-                to_numpy(result.disturbance),
-                to_numpy(result.cost.total),
-                {name: to_numpy(v) for name, v in result.cost.as_dict().items()},
-                to_numpy(step.reward),
-                to_numpy(result.collision),
-            )
-        )
+        recorder.state(result)
+        recorder.step(step)
         if bar is not None:
             bar.update(1)
         elif callback is not None:
@@ -252,13 +242,11 @@ def run_episodes(
         bar.close()
     sim_seconds[0] += sim_seconds_reset
     triggered = j_pre = j_exec = None
-    if hasattr(policy, "records"):
-        records = policy.records()
-        if getattr(records, "triggered", None) is not None and len(records.triggered) == n_steps:
-            triggered = np.asarray(records.triggered, dtype=bool)
-            j_pre = np.asarray(records.j_pre, dtype=float)
-            j_exec = np.asarray(records.j_exec, dtype=float)
-    u_n, u_applied, disturbance, stage, terms, reward, collision = zip(*steps)
+    records = policy.records()
+    if getattr(records, "triggered", None) is not None and len(records.triggered) == n_steps:
+        triggered = np.asarray(records.triggered, dtype=bool)
+        j_pre = np.asarray(records.j_pre, dtype=float)
+        j_exec = np.asarray(records.j_exec, dtype=float)
     gap_arrays = [np.stack(a) for a in zip(*gaps)] if gaps else [None, None, None]
     topo = sim.topology
     return EpisodeBatch(
@@ -266,20 +254,7 @@ def run_episodes(
         seeds=seeds,
         policy_name=policy_name,
         t=np.arange(n_steps + 1) * scenario.dynamics.dt,
-        z=np.stack([s[0] for s in states]),
-        reference_velocity=np.stack([s[1] for s in states]),
-        estimate=np.stack([s[2] for s in states]),
-        groups=np.stack([s[3] for s in states]),
-        min_separation=np.stack([s[4] for s in states]),
-        obstacle_surface=np.stack([s[5] for s in states]),
-        obstacle_center=np.stack([s[6] for s in states]),
-        u_n=np.stack(u_n),
-        u_applied=np.stack(u_applied),
-        disturbance=np.stack(disturbance),
-        stage_cost=np.stack(stage),
-        cost_terms={name: np.stack([t[name] for t in terms]) for name in terms[0]},
-        reward=np.stack(reward),
-        collision=np.stack(collision),
+        **recorder.arrays(),
         activation_time=np.array(to_numpy(topo.activation_time), dtype=float),
         restore_time=np.array(to_numpy(topo.restore_time), dtype=float),
         case=np.array(to_numpy(topo.case), dtype=int),
@@ -332,13 +307,62 @@ def policy_plans(
     Returns:
         (B, N, H, 3) [m/s^2].
     """
-    plans = getattr(policy, "plans", None)
+    plans = as_batch_policy(policy).plans
     if isinstance(plans, np.ndarray) and plans.shape[:2] == actions.shape[:2]:
         return plans
     u_max, horizon = scenario.dynamics.u_max, scenario.cost.horizon
     half_width = input_half_width(decode_observations(obs, scenario.n_uav).estimate, u_max)
     held = np.clip(np.clip(actions, -1.0, 1.0) * u_max, -half_width, half_width)
     return np.repeat(held[:, :, None, :], horizon, axis=2)
+
+
+class _Recorder:
+    """The per-step records of an episode batch, on the host: the state after the reset and
+    after every step, and every step's inputs, disturbance, cost and collisions."""
+
+    def __init__(self, centre_min: Any) -> None:
+        self.centre_min = centre_min
+        self.states: list[tuple[np.ndarray, ...]] = []
+        self.steps: list[tuple] = []
+
+    def state(self, result: Any) -> None:
+        self.states.append(_state_record(result, self.centre_min))
+
+    def step(self, step: Any) -> None:
+        """Records an :class:`~uav_formation_env.episode.EpisodeStep`."""
+        result = step.result
+        self.steps.append(
+            (
+                to_numpy(result.u_n),
+                to_numpy(result.u_applied),
+                to_numpy(result.disturbance),
+                to_numpy(result.cost.total),
+                {name: to_numpy(v) for name, v in result.cost.as_dict().items()},
+                to_numpy(step.reward),
+                to_numpy(result.collision),
+            )
+        )
+
+    def arrays(self) -> dict[str, Any]:
+        """The :class:`EpisodeBatch` fields of the records, stacked along time."""
+        states = self.states
+        u_n, u_applied, disturbance, stage, terms, reward, collision = zip(*self.steps)
+        return {
+            "z": np.stack([s[0] for s in states]),
+            "reference_velocity": np.stack([s[1] for s in states]),
+            "estimate": np.stack([s[2] for s in states]),
+            "groups": np.stack([s[3] for s in states]),
+            "min_separation": np.stack([s[4] for s in states]),
+            "obstacle_surface": np.stack([s[5] for s in states]),
+            "obstacle_center": np.stack([s[6] for s in states]),
+            "u_n": np.stack(u_n),
+            "u_applied": np.stack(u_applied),
+            "disturbance": np.stack(disturbance),
+            "stage_cost": np.stack(stage),
+            "cost_terms": {name: np.stack([t[name] for t in terms]) for name in terms[0]},
+            "reward": np.stack(reward),
+            "collision": np.stack(collision),
+        }
 
 
 def _state_record(result, centre_min) -> tuple[np.ndarray, ...]:

@@ -38,7 +38,6 @@ from uav_formation_env.core.cost import (
     anchored,
     prepare_horizon_cost,
     prepare_slot_horizon_cost,
-    relative_offset_sign,
     superposed_rollout,
 )
 from uav_formation_env.core.local_observation import DecodedLocalObservation, slot_frame
@@ -126,15 +125,12 @@ class OwnFrameViews:
     adjacency: np.ndarray
 
 
-def own_frame_views(
-    decoded: DecodedObservation, offsets: np.ndarray, mirrored: bool = False
-) -> OwnFrameViews:
+def own_frame_views(decoded: DecodedObservation, offsets: np.ndarray) -> OwnFrameViews:
     """Build every receiver's own-frame states from its observation alone.
 
     Args:
         decoded: :func:`~uav_formation_env.core.observation.decode_observations` of (B, N, dim).
         offsets: (N, 6) formation offsets z^d (mission data).
-        mirrored: literal mirrored-offset reading (as the observation was built).
     """
     velocity = decoded.velocity
     xp, where = namespace_of(velocity), {"dtype": velocity.dtype, "device": device(velocity)}
@@ -143,10 +139,10 @@ def own_frame_views(
     rows = xp.arange(n, device=device(velocity))[:, None]
     others = constant_like(others_index(n), velocity)
     z_own = xp.concat((xp.zeros((batch, n, 3), **where), velocity), axis=-1)
-    a_own = anchored(z_own, offsets, mirrored)  # (B, N, 6)
+    a_own = anchored(z_own, offsets)  # (B, N, 6)
     views = xp.repeat(a_own[:, :, None], n, axis=2)  # anchored, (B, N_recv, N_send, 6)
     views[:, rows, others] += decoded.relative_formation_error
-    views += relative_offset_sign(mirrored) * offsets  # states z_j = a_j ± z^d_j
+    views += offsets  # states z_j = a_j + z^d_j
     adjacency = xp.zeros((batch, n, n), **where)
     adjacency[:, rows, others] = xp.astype(decoded.neighbour, velocity.dtype)
     return OwnFrameViews(z_own=z_own, views=views, adjacency=adjacency)
@@ -274,9 +270,8 @@ def horizon_problems(
             **obstacles,
         )
     else:
-        offsets = asarray_like(np.asarray(scenario.formation.offsets, dtype=float), plans)
-        mirrored = scenario.formation.mirrored_offsets
-        frame = own_frame_views(decoded, offsets, mirrored)
+        offsets = asarray_like(scenario.formation.slot_offsets, plans)
+        frame = own_frame_views(decoded, offsets)
         trajectories = superposed_rollout(frame.views, received_plans(plans, frame.adjacency), dt)
         cost = prepare_horizon_cost(
             frame.z_own,
@@ -286,7 +281,6 @@ def horizon_problems(
             offsets,
             scenario.cost,
             dt,
-            mirrored,
             **obstacles,
         )
     half_width = input_half_width(decoded.estimate, scenario.dynamics.u_max)

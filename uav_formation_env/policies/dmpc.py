@@ -1,86 +1,20 @@
 """Nash-seeking distributed MPC (docs/model.md §4.3, §5, §6): the paper's reference policy.
 
-Information pattern
--------------------
-The policy object plays all N distributed controllers of B scenario copies at once, and relays
-their messages. UAV i acts on
+The policy object plays all N distributed controllers of B scenario copies at once and relays
+their messages. UAV i acts only on its own observation, the mission data every UAV carries
+(formation offsets, cost weights, horizon, schedule) and its neighbours' last broadcast plans,
+in its own frame (:mod:`uav_formation_env.policies.broadcast`). Per control step, for every UAV
+at once (a Jacobi best-response step): warm start from the shifted last plan (eq. 20), predict
+the neighbours under their received plans, evaluate ``J_pre = J_i(W_i)`` with the one
+definition of J_i, and if ``J_pre`` exceeds the event threshold minimise J_i over the input box
+with PIO / LFPIO / PSO (or exactly: ``"exact"``; to a Nash equilibrium: ``"nash"``), never
+returning worse than the warm start; apply the first input and broadcast the sequence.
 
-- its own observation (:mod:`uav_formation_env.core.observation`): own velocity, reference
-  velocity and "avoiding" flag, disturbance estimate, time, and per other UAV j the neighbour flag
-  h_ij and the relative formation error ``a_j - a_i`` (``a = z - z^d``);
-- mission data every UAV carries: formation offsets z^d, cost weights and horizon, δ, duration,
-  u_max and the preset-velocity schedule (from the scenario);
-- the last broadcast plans of its neighbours (``h_ij = 1`` in its own observation). Plans of other
-  UAVs are never used: a non-neighbour's view is predicted with zero inputs and enters J_i only
-  through the separation term (its relative position is the observed relative formation error
-  plus ``p^d_j - p^d_i``; docs/deviations.md §5).
-
-It never sees absolute positions, the simulator or the environment. UAV i works in its own frame:
-own position 0, own velocity as observed, neighbour j's anchored state = own + the relative
-formation error it observes. J_i only depends on differences of anchored states (and of
-positions) and on ``v_i - v^d_i``, so this frame gives the same J_i as global coordinates. The
-construction of these views and of every UAV's horizon problem lives in
-:mod:`uav_formation_env.policies.broadcast`.
-
-Algorithm per control step, for every UAV i simultaneously (a Jacobi best-response step)
------------------------------------------------------------------------------------------
-1. Warm start (eq. 20): ``W_i = [u_i(1|t-δ), ..., u_i(H-1|t-δ), u_i(H-1|t-δ)]`` from i's own last
-   broadcast plan; zeros at t = 0. i shifts each neighbour's received plan the same way (W_j).
-2. Neighbour predictions ẑ_j(k) = disturbance-free ZOH rollout of j's state (as i observes it)
-   under W_j (:func:`~uav_formation_env.core.dynamics.rollout`). Reference preview v^d_i(t + kδ)
-   from the schedule, or i's current reference held over the horizon while it is avoiding.
-3. ``J_pre = J_i(W_i)`` with the one definition of J_i
-   (:func:`~uav_formation_env.core.cost.prepare_horizon_cost`, the same terms as the reward's
-   :func:`~uav_formation_env.core.cost.stage_cost`).
-4. Event trigger: if ``J_pre > threshold`` (10), minimise J_i with PIO / LFPIO / PSO from W_i as the
-   initial global best over the box ``|u_n,c| <= u_max - |u_d,c|`` per axis (docs/model.md §1.5,
-   with ``u_d = -estimate``); the output is the better of W_i and the best sequence found, so it is
-   never worse than W_i. Otherwise the output is W_i (not triggered, no evaluations). All
-   triggered problems of all copies are gathered into one flat batch and solved by one
-   :func:`~uav_formation_env.policies.optimizers.minimise` call per step. Apart from the
-   separation term J_i is exactly quadratic in U_i, so by default the populations are evaluated
-   through its quadratic coefficients, identified per step from evaluations of the one definition
-   (:meth:`~uav_formation_env.core.cost.HorizonCost.quadratic`), plus the separation term
-   evaluated directly for the pairs that can come closer than d_s inside the search box (none in
-   formation flight); ``population_cost="direct"`` evaluates every population with the full
-   formula instead (same result to ~1e-13).
-5. Apply element 0 (the action is ``u_n(0|t) / u_max``; the plant adds ``u_d``) and broadcast the
-   whole output sequence.
-
-Exact alternatives to the metaheuristics (:mod:`uav_formation_env.policies.best_response`,
-:mod:`uav_formation_env.policies.nash`): ``optimizer="exact"`` replaces PIO / LFPIO in step 4 by
-the exact minimiser of J_i over the box (a box-constrained QP on J_i's identified quadratic form;
-same trigger, same never-worse-than-W rule); ``optimizer="nash"`` replaces step 4 by iterated
-exact best responses of the triggered UAVs (the untriggered ones keep W_i) from the warm starts
-until the profile is a Nash equilibrium of the horizon game among them.
-
-With ``inner_rounds = K > 1`` steps 2-4 repeat K times per step against the neighbours' outputs
-of the previous round (not shifted: same time), each round with the same event trigger. K = 1 is
-the paper's scheme.
-
-Steps 1-4 are a solver of :mod:`uav_formation_env.policies.dmpc_step`: ``TriggeredRounds`` with a
-``MetaheuristicSolver`` or an ``ExactSolver`` per round, or ``NashIteration``; each step appends a
-``StepRecord``, stacked by :meth:`NashDMPCPolicy.records`.
-
-Backends: ``act_batch`` takes numpy observations, or torch tensors on any device (the episode
-layer's ``backend="torch"``). With tensors the decoded observations, every UAV's horizon problem,
-the populations and the broadcast plans stay in torch on that device and the actions come back as
-a tensor there; with ``random="generator"`` the random numbers are still drawn from the copies'
-numpy generators on the host (the same numbers as on numpy, so a seed flies the same episode to
-rounding), with ``random="counter"`` on the device. On torch the
-metaheuristics (PIO, LFPIO, PSO) run, on either observation layout; ``"exact"`` and ``"nash"``
-are numpy-only.
-
-Randomness: one ``numpy.random.Generator`` per scenario copy (``random="generator"``, the default
-and the paper reproduction's numbers), or counter-based draws (``random="counter"``: Philox keyed
-by each copy's episode and policy seeds, counted by (draw, UAV, control step); see
-:class:`~uav_formation_env.policies.dmpc_step.CounterKeys`), which a GPU computes where it uses
-them and numpy and torch compute alike. ``reset(batch_size, seeds)`` seeds
-copy b's stream from its episode's seed (and the policy's ``seed``, if given), so an episode
-named by its seed flies the same, bit for bit, alone or inside any batch (the runner and
-``uav-formation evaluate`` pass the seeds). Without episode seeds the copies' streams are spawned
-from the policy's ``seed``. Within one copy, the triggered UAVs' problems share the copy's stream
-(UAV i's draws depend on which of its copy's UAVs trigger before it).
+The solvers live in :mod:`uav_formation_env.policies.dmpc_step`. Randomness: one numpy
+generator per copy seeded from its episode's seed (``random="generator"``), or counter-based
+draws computed where they are used (``random="counter"``). Observations may be numpy or torch
+tensors on any device. The full specification (information pattern, algorithm, backends,
+randomness) is docs/reference_policy.md, "The distributed-MPC Nash policy".
 """
 
 from __future__ import annotations
@@ -114,7 +48,8 @@ from uav_formation_env.policies.dmpc_step import (
     TriggeredRounds,
     step_solver,
 )
-from uav_formation_env.policies.registry import DMPC_OPTIMIZERS, SolverConfig, solver_config
+from uav_formation_env.policies.protocol import PolicyBase
+from uav_formation_env.policies.solvers import DMPC_OPTIMIZERS, SolverConfig, solver_config
 from uav_formation_env.seeding import check_seed, copy_streams
 
 __all__ = [
@@ -128,12 +63,12 @@ __all__ = [
 
 DEFAULT_THRESHOLD = 10.0  # event-trigger threshold on J_i(W) (docs/model.md §5) [-]
 
-POLICY_OPTIMIZERS = DMPC_OPTIMIZERS  # the solver names NashDMPCPolicy accepts (the registry's)
+POLICY_OPTIMIZERS = DMPC_OPTIMIZERS  # the solver names NashDMPCPolicy accepts
 
 RANDOM_SOURCES = ("generator", "counter")  # NashDMPCPolicy(random=...)
 
 
-class NashDMPCPolicy:
+class NashDMPCPolicy(PolicyBase):
     """Distributed MPC in which every UAV best-responds to its neighbours' broadcast plans.
 
     Acts from observations only (see the module docstring). ``act_batch`` is the core API; ``act``

@@ -47,7 +47,7 @@ from uav_formation_env.policies.optimizers import (
     RowStreams,
     minimise,
 )
-from uav_formation_env.policies.registry import SolverConfig
+from uav_formation_env.policies.solvers import SolverConfig
 
 __all__ = [
     "DRAWS_PER_ROUND",

@@ -45,7 +45,6 @@ def consensus_pd(
     offsets: np.ndarray,
     u_max: float,
     gains: ConsensusGains = ConsensusGains(),
-    mirrored: bool = False,
 ) -> np.ndarray:
     """Consensus PD input of every UAV.
 
@@ -56,12 +55,11 @@ def consensus_pd(
         offsets: (N, 6) formation offsets z^d.
         u_max: per-axis bound [m/s^2].
         gains: the PD gains.
-        mirrored: literal mirrored-offset reading of the formation.
 
     Returns:
         (B, N, 3) formation input u_n [m/s^2].
     """
-    a = anchored(z, offsets, mirrored)
+    a = anchored(z, offsets)
     degree = adjacency.sum(axis=-1, keepdims=True)
     disagreement = degree * a - np.einsum("bij,bjk->bik", adjacency, a)  # Σ_j h_ij (a_i - a_j)
     u = (

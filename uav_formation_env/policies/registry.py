@@ -8,53 +8,47 @@ from these):
   :mod:`~uav_formation_env.policies.optimizers`), ``exact`` (the best response solved exactly)
   and ``nash`` (best responses iterated to a Nash equilibrium every step);
 - :data:`SIMPLE_POLICIES`: ``heuristic`` (consensus PD) and ``random``;
-- anything else is the path of a stable-baselines3 model (:class:`~uav_formation_env.policies.
-  learned.SB3Policy`).
+- :data:`SHIPPED_MODELS`: the learned policies installed with the package (one per task, in the
+  format of :mod:`~uav_formation_env.policies.policy_file`, under :data:`MODELS_DIR`);
+- anything else is the path of a policy directory (``policy.json`` + ``policy.npz``) or of a
+  stable-baselines3 model (:class:`~uav_formation_env.policies.learned.SB3Policy`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Protocol
-
-import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.policies.best_response import ExactConfig
-from uav_formation_env.policies.learned import SB3Policy, TorchScriptPolicy
-from uav_formation_env.policies.nash import NashConfig
-from uav_formation_env.policies.optimizers.config import (
-    OPTIMIZERS,
-    LFPIOConfig,
-    PIOConfig,
-    PSOConfig,
-)
+from uav_formation_env.policies.learned import SB3Policy
+from uav_formation_env.policies.policy_file import FilePolicy, is_policy_dir
+from uav_formation_env.policies.protocol import BatchPolicy
 from uav_formation_env.policies.simple import HeuristicPolicy, RandomPolicy
+from uav_formation_env.policies.solvers import (
+    DMPC_OPTIMIZERS,
+    DMPC_SOLVERS,
+    SolverConfig,
+    solver_config,
+)
 
 __all__ = [
     "DMPC_OPTIMIZERS",
     "DMPC_SOLVERS",
+    "MODELS_DIR",
     "PAPER_OPTIMIZERS",
     "POLICY_HELP",
     "POLICY_LABELS",
     "POLICY_NAMES",
+    "SHIPPED_MODELS",
     "SIMPLE_POLICIES",
     "BatchPolicy",
     "SolverConfig",
     "make_policy",
     "run_model_file",
+    "model_scenario",
     "solver_config",
 ]
 
-SolverConfig = PIOConfig | LFPIOConfig | PSOConfig | ExactConfig | NashConfig
-# name -> the config of NashDMPCPolicy's solver (its defaults)
-DMPC_SOLVERS: dict[str, type[SolverConfig]] = {
-    **OPTIMIZERS,
-    "exact": ExactConfig,
-    "nash": NashConfig,
-}
-DMPC_OPTIMIZERS = tuple(DMPC_SOLVERS)  # ("pio", "lfpio", "pso", "exact", "nash")
 # name -> the policy built from (scenario, seed)
 _SIMPLE: dict[str, Callable[[Scenario, int | None], BatchPolicy]] = {
     "heuristic": lambda scenario, seed: HeuristicPolicy(scenario),
@@ -62,6 +56,13 @@ _SIMPLE: dict[str, Callable[[Scenario, int | None], BatchPolicy]] = {
 }
 SIMPLE_POLICIES = tuple(_SIMPLE)  # ("heuristic", "random")
 POLICY_NAMES = (*DMPC_OPTIMIZERS, *SIMPLE_POLICIES)
+MODELS_DIR = Path(__file__).resolve().parents[1] / "models"  # installed as package data
+# name -> what the model is; each directory holds policy.json, policy.npz, scenario.yaml
+SHIPPED_MODELS = {
+    "paper_dagger": "DAgger students of the exact DMPC on the paper scenario",
+    "random_fields_dagger": "DAgger students on random obstacle fields (random_fields)",
+    "random_swarm_dagger": "DAgger students on random swarms of 3-10 UAVs (random_swarm)",
+}
 PAPER_OPTIMIZERS = ("pio", "lfpio")  # the two the paper compares (its Table 2)
 POLICY_LABELS = {
     "pio": "PIO",
@@ -74,46 +75,51 @@ POLICY_LABELS = {
 }
 POLICY_HELP = (
     f"{', '.join(DMPC_OPTIMIZERS)} (the reference DMPC with that solver), "
-    f"{', '.join(SIMPLE_POLICIES)}, a run directory (uav-formation train's model.zip with its "
-    "vecnormalize.pkl, or the policy.pt of DAgger, BenchMARL, RLlib and the examples), a "
-    "stable-baselines3 model file (.zip; a vecnormalize.pkl beside it is applied) or a "
-    "TorchScript policy file (.pt)"
+    f"{', '.join(SIMPLE_POLICIES)}, a shipped learned policy ({', '.join(SHIPPED_MODELS)}: "
+    "it flies its own scenario), a policy directory or run directory (policy.json + "
+    "policy.npz, what every trainer of the project exports), or a stable-baselines3 model or "
+    "run directory (model.zip; obs_stats.npz beside it is applied)"
 )
 
 
-class BatchPolicy(Protocol):
-    """What :func:`~uav_formation_env.evaluation.run_episodes` needs of a policy
-    (``reset(batch_size, seeds)`` optional; a policy with ``needs_neighbour_index = True`` is
-    called as ``act_batch(obs, neighbour_index)`` with the local layout's slot index)."""
-
-    def act_batch(self, obs: np.ndarray) -> np.ndarray: ...
-
-
-def solver_config(optimizer: str | SolverConfig) -> SolverConfig:
-    """The solver config of a DMPC solver name (case-insensitive; its defaults), or the config
-    itself."""
-    if isinstance(optimizer, SolverConfig):
-        return optimizer
-    if isinstance(optimizer, str) and optimizer.lower() in DMPC_SOLVERS:
-        return DMPC_SOLVERS[optimizer.lower()]()
-    raise ValueError(
-        f"unknown optimizer {optimizer!r}: expected one of {sorted(DMPC_SOLVERS)} or a config "
-        "object"
-    )
+def model_scenario(name: str) -> Path | None:
+    """The ``scenario.yaml`` a saved model was trained for: a shipped model's, or that of the
+    model's run directory (the directory itself, or the model file's); None if it has none."""
+    if name.lower() in SHIPPED_MODELS:
+        return MODELS_DIR / name.lower() / "scenario.yaml"
+    path = Path(name)
+    for directory in (path, path.parent):
+        if directory.is_dir() and (directory / "scenario.yaml").is_file() and path.exists():
+            return directory / "scenario.yaml"
+    return None
 
 
-RUN_MODEL_FILES = ("policy.pt", "model.zip")  # what a run directory holds, in this order
+RUN_MODEL_FILES = ("policy.json", "model.zip")  # what a run directory holds
 
 
 def run_model_file(path: Path) -> Path:
-    """The model file of a run directory (``policy.pt`` of the DAgger, BenchMARL, RLlib and
-    example recipes; ``model.zip`` beside ``vecnormalize.pkl`` of ``uav-formation train``), else
-    ``path`` itself."""
-    if path.is_dir():
-        for name in RUN_MODEL_FILES:
-            if (path / name).is_file():
-                return path / name
+    """The SB3 model of a run directory (``model.zip`` beside ``obs_stats.npz`` of
+    ``uav-formation train``), else ``path`` itself."""
+    if path.is_dir() and (path / "model.zip").is_file():
+        return path / "model.zip"
     return path
+
+
+def _in_its_action_mode(policy: FilePolicy, scenario: Scenario) -> BatchPolicy:
+    """A policy file as an acceleration policy: one trained in the velocity action mode (its
+    ``action_mode``) flies through :class:`~uav_formation_env.policies.action_modes.
+    VelocitySetpointPolicy` with the set-point range and gain it was trained with."""
+    header = policy.header
+    if header.get("action_mode", "acceleration") != "velocity":
+        return policy
+    from uav_formation_env.config import EpisodeConfig
+    from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
+
+    episode = EpisodeConfig(
+        velocity_range=float(header.get("velocity_range", EpisodeConfig.velocity_range)),
+        velocity_gain=float(header.get("velocity_gain", EpisodeConfig.velocity_gain)),
+    )
+    return VelocitySetpointPolicy(policy, episode, scenario.dynamics.u_max)
 
 
 def make_policy(
@@ -122,9 +128,10 @@ def make_policy(
     seed: int | None = None,
     algo: str | None = None,
     random: str = "generator",
+    trust_pickle: bool = False,
 ) -> BatchPolicy:
-    """A policy from a name of :data:`POLICY_NAMES` (see the module docstring) or the path of a
-    stable-baselines3 model.
+    """A policy from a name of :data:`POLICY_NAMES` or :data:`SHIPPED_MODELS`, or the path of a
+    policy directory or a stable-baselines3 model (see the module docstring).
 
     Args:
         name: policy name (case-insensitive) or model path.
@@ -135,21 +142,29 @@ def make_policy(
         random: the DMPC optimisers' random numbers, ``"generator"`` (each copy's numpy
             generator) or ``"counter"`` (counter-based, drawn on the observations' device); see
             :class:`~uav_formation_env.policies.dmpc.NashDMPCPolicy`. Other policies ignore it.
+        trust_pickle: let a stable-baselines3 model read a ``vecnormalize.pkl`` (unpickling runs
+            code from the file: only for files you made yourself).
     """
     key = name.lower()
     if key in DMPC_SOLVERS:
-        from uav_formation_env.policies.dmpc import NashDMPCPolicy  # imports this module
+        from uav_formation_env.policies.dmpc import NashDMPCPolicy  # loads the optimisers
 
         return NashDMPCPolicy(scenario, key, seed=seed, random=random)
     if key in _SIMPLE:
         return _SIMPLE[key](scenario, seed)
-    path = run_model_file(Path(name))
-    if path.suffix == ".pt":
-        exported = TorchScriptPolicy(path)
+    path = MODELS_DIR / key if key in SHIPPED_MODELS else Path(name)
+    if is_policy_dir(path):
+        exported = FilePolicy(path)
         exported.check_scenario(scenario)
-        return exported
+        return _in_its_action_mode(exported, scenario)
+    if path.suffix == ".pt" or (path.is_dir() and (path / "policy.pt").is_file()):
+        raise ValueError(
+            f"policy {name!r}: TorchScript files (.pt) are not read (loading them runs code); "
+            "export the policy as a policy directory (policy.json + policy.npz)"
+        )
+    path = run_model_file(path)
     if path.is_file() or path.with_suffix(".zip").is_file():
-        policy = SB3Policy(path, algo)
+        policy = SB3Policy(path, algo, trust_pickle=trust_pickle)
         policy.check_scenario(scenario)
         return policy
     if path.is_dir():
@@ -159,6 +174,6 @@ def make_policy(
     if path.suffix == ".zip" or len(path.parts) > 1:
         raise FileNotFoundError(f"policy model file not found: {name!r}")
     raise ValueError(
-        f"unknown policy {name!r}: expected one of {list(POLICY_NAMES)}, the path of a "
-        "stable-baselines3 model (.zip) or of a TorchScript policy (.pt)"
+        f"unknown policy {name!r}: expected one of {[*POLICY_NAMES, *SHIPPED_MODELS]}, a policy "
+        "directory (policy.json + policy.npz) or a stable-baselines3 model (.zip)"
     )

@@ -13,7 +13,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.cost import relative_offset_sign
 from uav_formation_env.core.local_observation import decode_local_observations, slot_frame
 from uav_formation_env.core.observation import (
     decode_observations,
@@ -21,12 +20,13 @@ from uav_formation_env.core.observation import (
     require_decodable,
 )
 from uav_formation_env.policies.heuristic import ConsensusGains, consensus_pd
+from uav_formation_env.policies.protocol import PolicyBase
 from uav_formation_env.seeding import check_seed, copy_streams
 
 __all__ = ["HeuristicPolicy", "RandomPolicy"]
 
 
-class RandomPolicy:
+class RandomPolicy(PolicyBase):
     """Uniform random normalised actions in [-1, 1]^3 (a lower bound on any controller).
 
     One stream per copy, seeded from the episode seeds given to :meth:`reset` (see
@@ -52,7 +52,7 @@ class RandomPolicy:
         return np.stack([g.uniform(-1.0, 1.0, size=(n_uav, 3)) for g in self._rngs])
 
 
-class HeuristicPolicy:
+class HeuristicPolicy(PolicyBase):
     """The consensus PD controller (:func:`~uav_formation_env.policies.heuristic.consensus_pd`)
     acting from observations only.
 
@@ -74,8 +74,7 @@ class HeuristicPolicy:
         require_decodable(scenario, "HeuristicPolicy")
         self.n_uav = scenario.n_uav
         self.u_max = scenario.dynamics.u_max
-        self.offsets = np.asarray(scenario.formation.offsets, dtype=float)
-        self.mirrored = scenario.formation.mirrored_offsets
+        self.offsets = scenario.formation.slot_offsets
         self.gains = ConsensusGains() if gains is None else gains
         self.observation = scenario.observation
 
@@ -85,16 +84,15 @@ class HeuristicPolicy:
             return self._act_local(obs)
         batch, n = obs.shape[:2]
         decoded = decode_observations(obs, n)
-        sign = relative_offset_sign(self.mirrored)
         own = np.arange(n)
         index = others_index(n)  # (N, N-1)
         # anchored states a of every UAV as UAV i sees them (own: position 0), (B, N_i, N, 6)
         a_own = np.zeros((batch, n, 6))
-        a_own[..., 3:] = decoded.velocity - sign * self.offsets[:, 3:]
+        a_own[..., 3:] = decoded.velocity - self.offsets[:, 3:]
         view = np.empty((batch, n, n, 6))
         view[:, own, own] = a_own
         view[:, own[:, None], index] = a_own[:, :, None] + decoded.relative_formation_error
-        z = view + sign * self.offsets  # back from anchored to states
+        z = view + self.offsets  # back from anchored to states
         adjacency = np.zeros((batch, n, n, n))
         adjacency[:, own[:, None], own[:, None], index] = decoded.neighbour
         reference = np.broadcast_to(decoded.reference_velocity[:, :, None], (batch, n, n, 3)).copy()
@@ -105,7 +103,6 @@ class HeuristicPolicy:
             self.offsets,
             self.u_max,
             self.gains,
-            self.mirrored,
         ).reshape(batch, n, n, 3)
         return u[:, own, own] / self.u_max
 

@@ -2,8 +2,7 @@
 
 :class:`TopViewRenderer` builds one :class:`matplotlib.figure.Figure` on a
 :class:`~matplotlib.backends.backend_agg.FigureCanvasAgg` when it is created and only updates its
-artists afterwards, so a frame costs one Agg draw and no pyplot state is touched (``pyplot`` is
-imported only by :meth:`TopViewRenderer.show`, for ``render_mode="human"``).
+artists afterwards: a frame costs one Agg draw and touches no pyplot state.
 
 What a frame shows (top view, x right, y up, equal aspect):
 
@@ -24,8 +23,7 @@ grid                      light lines at a world-fixed spacing of 1, 2 or 5 x 10
                           With ``show_ticks=True``: matplotlib axes with tick labels instead
 ========================  =====================================================================
 
-The view follows the swarm: it is centred on the mean horizontal position and spans ``view_span``
-metres along the shorter image side; with ``fit_swarm`` it widens when the swarm does not fit.
+The view is centred on the swarm and spans ``view_span`` m (wider with ``fit_swarm``).
 
 :func:`render_episode` (module :mod:`~uav_formation_env.render.episode`) flies one episode of a
 policy with the evaluation runner and writes these frames as a GIF, or an MP4 with the

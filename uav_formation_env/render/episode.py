@@ -23,6 +23,7 @@ from tqdm import tqdm
 from uav_formation_env.config import Scenario
 from uav_formation_env.core.local_observation import decode_local_observations
 from uav_formation_env.core.observation import decode_observations, others_index
+from uav_formation_env.policies.protocol import as_batch_policy
 from uav_formation_env.render.gif import write_gif
 from uav_formation_env.render.top_view import TopViewRenderer
 
@@ -120,7 +121,7 @@ class AdjacencyRecorder:
         self.observation = scenario.observation
         # the local layout's graph needs the slot index, whether the policy needs it or not
         self.needs_neighbour_index = self.observation.kind == "local"
-        self._forward_index = getattr(policy, "needs_neighbour_index", False)
+        self._forward_index = as_batch_policy(policy).needs_neighbour_index
         self._adjacency: list[np.ndarray] = []
 
     def act_batch(self, obs: np.ndarray, neighbour_index: np.ndarray | None = None) -> np.ndarray:

@@ -106,9 +106,9 @@ def difference_paragraphs(
         "y ∈ [−40, 40] m, docs/model.md §8: the paper does not give them) and the disturbance's "
         "random noise (eq. 21) "
         "redrawn per seed. The spread between seeds (± above) is the scale on which a single "
-        "run can differ from our mean. A seed's episode depends on that seed alone: every "
-        "copy of a batch, and every optimiser acting on it, draws from its own random stream, "
-        "so seed 0 flies the same alone, in a 5-seed run or in a 10-seed run."
+        "run can differ from our mean. A seed's episode does not depend on the other seeds of "
+        "its batch: every copy draws from its own generator, seeded by its episode's seed, so "
+        "seed 0 of a 5-seed run is seed 0 of a 10-seed run (tests/test_seeding.py)."
     )
     for variant in ("pio", "lfpio"):
         if variant not in rows:

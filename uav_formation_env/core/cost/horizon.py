@@ -35,7 +35,6 @@ from uav_formation_env.core.cost.stage import (
     neighbour_moments,
     obstacle_active,
     others_mask,
-    relative_offset_sign,
     separation_active,
     separation_sq,
     take_flat,
@@ -339,7 +338,6 @@ def prepare_horizon_cost(
     offsets: np.ndarray,
     weights: CostConfig,
     dt: float,
-    mirrored: bool = False,
     obstacle_centre: np.ndarray | None = None,
     obstacle_clearance: np.ndarray | None = None,
 ) -> HorizonCost:
@@ -356,7 +354,6 @@ def prepare_horizon_cost(
         offsets: (N, 6) z^d.
         weights: q, r, m, n, s, d_s and the obstacle term's o, c_o, L.
         dt: control step δ [s].
-        mirrored: literal mirrored-offset reading.
         obstacle_centre: (B, R, M, 2) horizontal centres of the obstacles each receiver senses,
             in the coordinates of ``z0`` [m]; None: no obstacle term.
         obstacle_clearance: (B, R, M) their clearance radii R + c_o, 0 for an absent one [m].
@@ -370,14 +367,14 @@ def prepare_horizon_cost(
     send_offsets = (
         offsets.reshape(1, 1, n_uav, 1, 6) if per_receiver else offsets.reshape(1, n_uav, 1, 6)
     )
-    others = neighbour_trajectories - relative_offset_sign(mirrored) * send_offsets
+    others = neighbour_trajectories - send_offsets
     batch, n_recv = z0.shape[:2]
     positions = neighbour_trajectories[..., :3]
     if not per_receiver:
         positions = xp.broadcast_to(positions[:, None], (batch, n_recv, *positions.shape[1:]))
     return _prepared(
         z0,
-        z0 - anchored(z0, offsets, mirrored),
+        z0 - anchored(z0, offsets),
         neighbour_moments(others, adjacency, per_receiver),
         positions,
         others_mask(batch, n_recv, like=z0),
@@ -484,7 +481,6 @@ def horizon_cost(
     offsets: np.ndarray,
     weights: CostConfig,
     dt: float,
-    mirrored: bool = False,
     obstacle_centre: np.ndarray | None = None,
     obstacle_clearance: np.ndarray | None = None,
 ) -> CostTerms:
@@ -500,7 +496,6 @@ def horizon_cost(
         offsets: (N, 6) z^d.
         weights: q, r, m, n, s, d_s and the obstacle term's o, c_o, L.
         dt: control step δ [s].
-        mirrored: literal mirrored-offset reading.
         obstacle_centre: (B, N, M, 2) horizontal centres of the obstacles each UAV senses, in
             the coordinates of ``z0`` [m]; None: no obstacle term.
         obstacle_clearance: (B, N, M) their clearance radii R + c_o, 0 for an absent one [m].
@@ -516,7 +511,6 @@ def horizon_cost(
         offsets,
         weights,
         dt,
-        mirrored,
         obstacle_centre,
         obstacle_clearance,
     ).terms(candidates)

@@ -24,13 +24,9 @@ Conventions shared by all three methods (docs/model.md §6):
   ``per_dimension_rand``.
 
 Speed: at the DMPC's sizes (a few problems of 30 pigeons x 15 components) an iteration is
-dominated by per-call overhead, so the loops work in preallocated buffers, with in-place ufuncs and
-plain indexing. LFPIO's per-iteration bookkeeping (moves, clipping, best-so-far, greedy choice,
-weighted centre) also exists as two numba kernels that repeat the numpy operations per component
-in the same order, so they give the same numbers bit for bit (tested); they are used when numba is
-installed (the ``[fast]`` extra) unless ``UAV_FORMATION_NO_NUMBA`` is set. What is left is mostly
-the Gaussian draws of the Lévy steps (``Generator.standard_normal``, kept so that a seed gives the
-same stream as before).
+dominated by per-call overhead, so the loops work in preallocated buffers. LFPIO's bookkeeping
+also exists as numba kernels giving the same numbers bit for bit (tested), used when numba is
+installed (the ``[fast]`` extra) unless ``UAV_FORMATION_NO_NUMBA`` is set.
 """
 
 __all__ = [
