@@ -325,7 +325,7 @@ class FormationSim:
             if initial.formation_jitter is None:
                 z[row, :, :3] = initial_positions(rng, N, low, high, initial.min_spacing)
             else:
-                slots = np.asarray(scene.formation.slot_offsets(), dtype=float)[:, :3]
+                slots = scene.formation.slot_offsets[:, :3]
                 centre = (low + high) / 2
                 z[row, :, :3] = formation_positions(rng, slots, centre, initial.formation_jitter)
             z[row, :, 3:] = initial.velocity
