@@ -42,6 +42,7 @@ tensors on that device (docs/architecture.md, "Backends").
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -301,7 +302,6 @@ class FormationEpisodes:
             compile=compile,
             noise=noise,
         )
-        self.xp = self.sim.xp
         self.batch_size = self.sim.batch_size
         self.n_uav = self.sim.n_uav
         self.u_max = scenario.dynamics.u_max
@@ -318,6 +318,11 @@ class FormationEpisodes:
         self._divergence = episode.max_formation_error > 0 or episode.max_velocity_error > 0
         self._no_copy = self._constant(np.zeros(self.batch_size, dtype=bool))
         self._no_penalty = self._constant(np.zeros((self.batch_size, self.n_uav)))
+
+    @property
+    def xp(self) -> ModuleType:
+        """The simulator's array namespace."""
+        return self.sim.xp
 
     def _constant(self, array: np.ndarray):
         """A constant shared by every step (no allocation per step), on the simulator's device;

@@ -1,0 +1,66 @@
+"""What the ecosystem expects of an env beyond its API checkers: copies, pickles, the MPE2-style
+module ``uav_formation_v0``, ``max_cycles``, a fixed agent set for TorchRL, subprocess workers."""
+
+from __future__ import annotations
+
+import copy
+import pickle
+
+import numpy as np
+import pytest
+
+from uav_formation_env import env, parallel_env
+
+
+def _rollout(e, seed: int, steps: int = 15) -> list:
+    """Observations and rewards of ``steps`` steps of fixed pseudo-random actions."""
+    e.reset(seed=seed)
+    rng = np.random.default_rng(7)
+    out = []
+    for _ in range(steps):
+        if not e.agents:
+            break
+        actions = {a: rng.uniform(-1, 1, 3).astype(np.float32) for a in e.agents}
+        obs, rew, *_ = e.step(actions)
+        out.append((obs, rew))
+    return out
+
+
+def _same(a: list, b: list) -> bool:
+    return len(a) == len(b) and all(
+        oa.keys() == ob.keys()
+        and all(np.array_equal(oa[k], ob[k]) for k in oa)
+        and ra == rb
+        for (oa, ra), (ob, rb) in zip(a, b, strict=True)
+    )
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        pytest.param(lambda e: copy.deepcopy(e), id="deepcopy"),
+        pytest.param(lambda e: pickle.loads(pickle.dumps(e)), id="pickle"),
+    ],
+)
+@pytest.mark.parametrize("scenario", ["paper", "random_fields"])
+def test_copies_step_as_the_original(make, scenario):
+    original = parallel_env(scenario)
+    twin = make(original)
+    assert _same(_rollout(original, seed=3), _rollout(twin, seed=3))
+
+
+def test_a_copy_taken_mid_episode_goes_on_alike():
+    original = parallel_env("random_fields")
+    _rollout(original, seed=2, steps=5)
+    twin = pickle.loads(pickle.dumps(original))
+    action = {a: np.full(3, 0.3, np.float32) for a in original.agents}
+    o1, r1, *_ = original.step(action)
+    o2, r2, *_ = twin.step(action)
+    assert r1 == r2 and all(np.array_equal(o1[k], o2[k]) for k in o1)
+
+
+def test_the_aec_view_pickles():
+    aec = env()
+    aec.reset(seed=1)
+    twin = pickle.loads(pickle.dumps(aec))
+    assert twin.agent_selection == aec.agent_selection
