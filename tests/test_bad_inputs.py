@@ -129,6 +129,8 @@ TABLE: list[tuple[str, Callable[[], object], type[BaseException], str]] = [
         ValueError,
         r"'observer\.enabled'.*true/false",
     ),
+    ("negative max_cycles", lambda: parallel_env(max_cycles=-1), ValueError, r"'episode\.max_cycles'.*>= 0"),
+    ("fractional max_cycles", lambda: parallel_env(max_cycles=2.5), ValueError, r"'episode\.max_cycles'"),
     # ---- YAML
     ("malformed YAML", yaml_file("duration: [1, 2\n"), ValueError, r"not valid YAML at line \d"),
     ("YAML list at top level", yaml_file("- 1\n- 2\n"), ValueError, r"expected a mapping"),

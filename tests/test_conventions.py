@@ -28,9 +28,7 @@ def _rollout(e, seed: int, steps: int = 15) -> list:
 
 def _same(a: list, b: list) -> bool:
     return len(a) == len(b) and all(
-        oa.keys() == ob.keys()
-        and all(np.array_equal(oa[k], ob[k]) for k in oa)
-        and ra == rb
+        oa.keys() == ob.keys() and all(np.array_equal(oa[k], ob[k]) for k in oa) and ra == rb
         for (oa, ra), (ob, rb) in zip(a, b, strict=True)
     )
 
@@ -64,3 +62,42 @@ def test_the_aec_view_pickles():
     aec.reset(seed=1)
     twin = pickle.loads(pickle.dumps(aec))
     assert twin.agent_selection == aec.agent_selection
+
+
+def test_pettingzoo_max_cycles_test_passes():
+    from pettingzoo.test import max_cycles_test
+
+    from uav_formation_env import uav_formation_v0
+
+    max_cycles_test(uav_formation_v0)
+
+
+def test_the_module_has_mpe2s_three_constructors():
+    from uav_formation_env import uav_formation_v0
+
+    aec = uav_formation_v0.raw_env(max_cycles=3)
+    aec.reset(seed=0)
+    assert aec.metadata["name"] == "uav_formation_v0"
+    assert uav_formation_v0.parallel_env().metadata["name"] == "uav_formation_v0"
+
+
+@pytest.mark.parametrize("start", ["zero", "random"])
+def test_max_cycles_counts_from_the_episodes_start(start):
+    """Truncation after exactly K steps wherever along the mission the episode starts, and again
+    after each reset."""
+    e = parallel_env("random_fields", max_cycles=6, episode__start=start)
+    for seed in (1, 2):
+        e.reset(seed=seed)
+        for k in range(1, 7):
+            _, _, term, trunc, _ = e.step({a: np.zeros(3, np.float32) for a in e.agents})
+            assert not any(term.values())
+            assert all(trunc.values()) == (k == 6), k
+        assert e.agents == []
+
+
+def test_max_cycles_is_the_scenario_option_episode_max_cycles():
+    from uav_formation_env.config_io import scenario_from_dict, to_dict
+
+    e = parallel_env(max_cycles=4)
+    assert e.scenario.episode.max_cycles == 4
+    assert scenario_from_dict(to_dict(e.scenario)).episode.max_cycles == 4

@@ -604,6 +604,8 @@ class EpisodeConfig:
       b T / B; later resets start at 0). The state there is the one the ``start_controller``
       (the consensus PD ``"heuristic"``) reaches by flying the episode from t = 0, so that short
       rollouts see both obstacles and every turn.
+    - ``max_cycles``: truncate an episode after this many steps from its start (PettingZoo's
+      ``max_cycles``); 0 = off, episodes end at ``Scenario.duration``.
     """
 
     reward: str = "raw"  # "raw", "scaled" or "log1p"
@@ -614,6 +616,7 @@ class EpisodeConfig:
     corridor_penalty: float = 0.0  # cost added to each agent on leaving the corridor [-]
     start: str = "zero"  # "zero", "random" or "staggered": where along the mission episodes start
     start_controller: str = "heuristic"  # flies a copy to its start step
+    max_cycles: int = 0  # truncate after this many steps of an episode; 0 = off [steps]
 
     def __post_init__(self) -> None:
         _require(
@@ -635,6 +638,13 @@ class EpisodeConfig:
             self.start_controller in START_CONTROLLERS,
             "episode.start_controller",
             f"must be one of {START_CONTROLLERS}, got {self.start_controller!r}",
+        )
+        _require(
+            isinstance(self.max_cycles, int)
+            and not isinstance(self.max_cycles, bool)
+            and self.max_cycles >= 0,
+            "episode.max_cycles",
+            f"must be an integer >= 0 (0 = off), got {self.max_cycles!r}",
         )
 
 

@@ -19,7 +19,11 @@ from uav_formation_env.extras import require
 def resolve_with_overrides(
     scenario: str | Path | Scenario | Mapping[str, Any], overrides: Mapping[str, Any]
 ) -> Scenario:
-    """A scenario from a name / YAML path / mapping / object, with validated field overrides."""
+    """A scenario from a name / YAML path / mapping / object, with validated field overrides
+    (``max_cycles``, PettingZoo's name, stands for ``episode.max_cycles``)."""
+    if "max_cycles" in overrides:
+        overrides = {**overrides}
+        overrides["episode.max_cycles"] = overrides.pop("max_cycles")
     resolved = resolve_scenario(scenario)
     return with_overrides(resolved, overrides) if overrides else resolved
 
@@ -39,7 +43,8 @@ def parallel_env(
         **overrides: single fields, validated like the scenario: nested mappings
             (``observer={"enabled": False}``) or double-underscore paths
             (``observer__enabled=False``), e.g. the training devices of the episode layer
-            (``episode__reward="log1p"``, ``episode__corridor_width=200.0``).
+            (``episode__reward="log1p"``, ``episode__corridor_width=200.0``);
+            ``max_cycles=K`` truncates episodes after K steps (``episode.max_cycles``).
     """
     return UAVFormationParallelEnv(
         resolve_with_overrides(scenario, overrides), render_mode, info_mode
