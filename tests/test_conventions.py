@@ -101,3 +101,39 @@ def test_max_cycles_is_the_scenario_option_episode_max_cycles():
     e = parallel_env(max_cycles=4)
     assert e.scenario.episode.max_cycles == 4
     assert scenario_from_dict(to_dict(e.scenario)).episode.max_cycles == 4
+
+
+def test_torchrl_wraps_a_distribution_over_n_with_a_mask():
+    """``random_swarm`` draws N in 3..10 per reset; TorchRL's wrapper sees one group of the
+    possible agents, the mask marking this episode's, over rollouts of 50 steps from 3 resets."""
+    pytest.importorskip("torchrl")
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    swarm = parallel_env("random_swarm")
+    wrapped = PettingZooWrapper(swarm, use_mask=True, done_on_any=False, seed=0)
+    seen = set()
+    for _ in range(3):
+        td = wrapped.rollout(50, break_when_any_done=False)
+        n = len(swarm.agents)  # this episode's N (first N of possible_agents)
+        assert td.batch_size == (50,)
+        mask = td["uav", "mask"]
+        assert (mask.sum(-1) == n).all() and mask[:, :n].all()
+        assert not td["next", "done"].any()  # one episode, not a reset per step
+        assert td["next", "uav", "info", "neighbours"].shape == (50, 10, 10)
+        assert not td["next", "uav", "info", "neighbours"][:, :, n:].any()
+        seen.add(n)
+    assert len(seen) > 1
+
+
+def test_a_distribution_over_n_pads_the_neighbour_mask_and_ignores_absent_actions():
+    swarm = parallel_env("random_swarm")
+    obs, infos = swarm.reset(seed=1)
+    n = len(swarm.agents)
+    assert n < len(swarm.possible_agents)
+    assert all(infos[a]["neighbours"].shape == (10,) for a in swarm.possible_agents)
+    actions = {a: np.full(3, 0.5, np.float32) for a in swarm.possible_agents}
+    _, rewards, *_, infos = swarm.step(actions)
+    assert set(rewards) == set(swarm.agents)
+    assert all(infos[a]["neighbours"].shape == (10,) for a in swarm.agents)
+    with pytest.raises(ValueError, match="unknown agent"):
+        swarm.step({**actions, "uav_10": np.zeros(3)})
