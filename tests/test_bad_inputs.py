@@ -22,6 +22,7 @@ from uav_formation_env.config_io import resolve_scenario, scenario_from_dict, wi
 from uav_formation_env.evaluation import make_policy, run_episodes
 from uav_formation_env.extras import MissingExtraError
 from uav_formation_env.policies import NashDMPCPolicy
+from uav_formation_env.run_folder import MARKER
 
 MODELS = Path(__file__).resolve().parents[1] / "baselines" / "models"
 PPO = MODELS / "paper_ppo" / "model.zip"
@@ -247,6 +248,27 @@ def malformed_yaml(tmp_path: Path) -> str:
     return str(path)
 
 
+def earlier_run(tmp_path: Path) -> Path:
+    out = tmp_path / "earlier"
+    out.mkdir()
+    (out / "summary.json").write_text("{}", encoding="utf-8")
+    (out / MARKER).write_text("{}", encoding="utf-8")
+    return out
+
+
+def foreign_folder(tmp_path: Path) -> Path:
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("not a run", encoding="utf-8")
+    return out
+
+
+def existing_gif(tmp_path: Path) -> Path:
+    out = tmp_path / "episode.gif"
+    out.write_bytes(b"GIF89a")
+    return out
+
+
 # (id, argv (tmp_path -> list), pattern of the one error line)
 CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("zero seeds", lambda t: ["evaluate", "--seeds", "0"], r"--seeds: expected an integer >= 1"),
@@ -272,6 +294,11 @@ CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("counter draws on ray", lambda t: ["evaluate", "--backend", "ray", "--random-source", "counter", "--duration", "1"], r"--random-source counter is not available with --backend ray"),
     ("shield on the full layout", lambda t: ["evaluate", "--policy", "heuristic", "--shield", "--duration", "1"], r"safety shield reads the local observation layout.*'full'"),
     ("shield on ray", lambda t: ["evaluate", "--backend", "ray", "--shield", "--duration", "1"], r"--shield is not available with --backend ray"),
+    ("evaluate onto an earlier run", lambda t: ["evaluate", "--policy", "heuristic", "--duration", "1", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
+    ("reproduce onto an earlier run", lambda t: ["reproduce", "--quick", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
+    ("run onto an earlier run", lambda t: ["run", "--out", str(earlier_run(t))], r"--out .* is not empty"),
+    ("overwrite a folder no run wrote", lambda t: ["evaluate", "--policy", "heuristic", "--duration", "1", "--overwrite", "--out", str(foreign_folder(t))], r"no uav-formation run wrote"),
+    ("render onto an existing file", lambda t: ["render", "--duration", "1", "--policy", "heuristic", "--out", str(existing_gif(t))], r"exists; pass --overwrite"),
     ("reproduce: counter draws on ray", lambda t: ["reproduce", "--backend", "ray", "--random-source", "counter", "--quick", "--out", str(t)], r"random='counter' is not available with backend='ray'"),
 ]  # fmt: skip
 
