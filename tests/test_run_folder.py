@@ -151,3 +151,36 @@ def test_sigint_during_reproduce_leaves_the_earlier_run_byte_identical(tmp_path)
     assert contents(out) == files
     assert leftovers(tmp_path) == []
     assert os.listdir(tmp_path) == ["D"]
+
+
+def test_sigint_during_train_saves_the_model_reached(tmp_path):
+    """Ctrl-C during ``uav-formation train`` ends training, saves the model reached into --out
+    (moved into place whole, ``interrupted: true`` in config.yaml) and exits with 130."""
+    pytest.importorskip("stable_baselines3")
+    import yaml
+
+    out = tmp_path / "run"
+    argv = [
+        "train", "--algo", "ppo", "--timesteps", "100000000", "--out", str(out),
+        "--scenario", "n3", "--copies", "1", "--no-progress",
+        "--set", "n_steps=16", "batch_size=16", "n_epochs=1", "eval_freq=0", "checkpoint_freq=0",
+    ]  # fmt: skip
+    process = subprocess.Popen(
+        [sys.executable, "-m", "uav_formation_env.cli", *argv],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 300
+    # the first rollout is logged: training is under way
+    while not any(p.stat().st_size for p in tmp_path.glob(".run.partial-*/progress.csv")):
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "interrupted at" in err
+    config = yaml.safe_load((out / "config.yaml").read_text())
+    assert config["interrupted"] is True and 0 < config["timesteps"] < 100000000
+    assert (out / "model.zip").stat().st_size > 0 and (out / "scenario.yaml").is_file()
+    assert (out / MARKER).is_file() and leftovers(tmp_path) == []
