@@ -36,6 +36,22 @@ _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _SAFE_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
+class _UniqueKeyLoader(_SAFE_LOADER):  # type: ignore[misc, valid-type]
+    """The safe loader, refusing a mapping that repeats a key (YAML says keys are unique; PyYAML
+    keeps the last silently)."""
+
+    def construct_mapping(self, node, deep=False):  # noqa: ANN001, ANN201 - PyYAML's signature
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def to_dict(obj: Any) -> Any:
     """Plain-data (dict/list/float) form of a config dataclass, fit for YAML or JSON."""
     if dataclasses.is_dataclass(obj):
@@ -227,7 +243,7 @@ def load_scenario(path: str | Path) -> Scenario:
     """
     with open(path, encoding="utf-8") as stream:
         try:
-            data = yaml.load(stream, Loader=_SAFE_LOADER)
+            data = yaml.load(stream, Loader=_UniqueKeyLoader)
         except yaml.YAMLError as error:
             mark = getattr(error, "problem_mark", None)
             where = "" if mark is None else f" at line {mark.line + 1}, column {mark.column + 1}"

@@ -398,6 +398,12 @@ class FormationSim:
             self.observer = self._observer_held(
                 self.observer, self.z[..., 3:], a, u, self.dt, obs_cfg
             )
+            if not bool(xp.isfinite(self.observer.d_hat).all()):
+                raise ValueError(
+                    f"the observer diverged (non-finite estimate at t = {float(self.t.max()):g} "
+                    f"s): its tick dynamics.dt / observer.substeps = {self.dt / obs_cfg.substeps:g}"
+                    " s is too long for its gains; raise observer.substeps"
+                )
         self.z = zoh_step(self.z, a, self.dt)
         self.steps += 1
         # steps x dt: no drift from repeated addition (torch: int x float would be float32)

@@ -131,11 +131,11 @@ def make_policy(
     if path.is_dir() and (path / "policy.pt").is_file():
         path = path / "policy.pt"  # a run directory of the RLlib recipe
     if path.suffix == ".pt":
-        exported = TorchScriptPolicy(path)
+        exported = _loaded(path, lambda: TorchScriptPolicy(path))
         exported.check_scenario(scenario)
         return exported
     if path.is_file() or path.with_suffix(".zip").is_file():
-        policy = SB3Policy(path, algo)
+        policy = _loaded(path, lambda: SB3Policy(path, algo))
         policy.check_scenario(scenario)
         return policy
     if path.suffix == ".zip" or len(path.parts) > 1:
@@ -144,3 +144,19 @@ def make_policy(
         f"unknown policy {name!r}: expected one of {list(POLICY_NAMES)}, the path of a "
         "stable-baselines3 model (.zip) or of a TorchScript policy (.pt)"
     )
+
+
+def _loaded(path: Path, load: Callable[[], BatchPolicy]) -> BatchPolicy:
+    """``load()``, with a corrupt or foreign file's error (torch's, pickle's, zipfile's) as one
+    ``ValueError`` naming the file; the loaders' own errors (ValueError, a missing file or
+    extra) pass unchanged."""
+    try:
+        return load()
+    except (FileNotFoundError, ImportError, ValueError):
+        raise
+    except Exception as error:  # noqa: BLE001 - any failure of a third-party loader
+        first = str(error).strip().splitlines()[0] if str(error).strip() else ""
+        raise ValueError(
+            f"cannot load the model {str(path)!r} (corrupt, truncated or not a model file?): "
+            f"{type(error).__name__}: {first[:200]}"
+        ) from error
