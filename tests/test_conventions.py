@@ -137,3 +137,32 @@ def test_a_distribution_over_n_pads_the_neighbour_mask_and_ignores_absent_action
     assert all(infos[a]["neighbours"].shape == (10,) for a in swarm.agents)
     with pytest.raises(ValueError, match="unknown agent"):
         swarm.step({**actions, "uav_10": np.zeros(3)})
+
+
+NO_NUMBA_CACHE = """
+import numba.core.caching as caching
+caching.CacheImpl._locator_classes = []  # as with a read-only install and $HOME
+import numpy as np
+from uav_formation_env.cli import main
+from uav_formation_env import parallel_env
+env = parallel_env()
+env.reset(seed=0)
+env.step({a: np.zeros(3, np.float32) for a in env.agents})  # the compiled observer runs
+try:
+    main(["--help"])
+except SystemExit as exit_:
+    assert exit_.code == 0
+print("ok")
+"""
+
+
+def test_import_and_help_without_a_writable_numba_cache():
+    pytest.importorskip("numba")
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, "-c", NO_NUMBA_CACHE], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.rstrip().endswith("ok") and "usage: uav-formation" in done.stdout
