@@ -166,3 +166,36 @@ def test_import_and_help_without_a_writable_numba_cache():
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.rstrip().endswith("ok") and "usage: uav-formation" in done.stdout
+
+
+SUBPROC_VEC_ENV = """
+import uav_formation_env
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import SubprocVecEnv
+venv = make_vec_env(
+    "uav_formation_env/Formation-v0",
+    n_envs=2,
+    vec_env_cls=SubprocVecEnv,
+    vec_env_kwargs={"start_method": "forkserver"},
+)
+assert venv.reset().shape == (2, 235)
+venv.close()
+print("ok")
+"""
+
+
+def test_make_vec_env_with_subprocess_workers():
+    """``python -c`` (no ``__main__`` that imports the package): the plain Gymnasium id works in
+    SB3's forkserver workers."""
+    pytest.importorskip("stable_baselines3")
+    import multiprocessing
+    import subprocess
+    import sys
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        pytest.skip("no fork server on this platform")
+    done = subprocess.run(
+        [sys.executable, "-c", SUBPROC_VEC_ENV], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.rstrip().endswith("ok")
