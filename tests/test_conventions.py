@@ -199,3 +199,31 @@ def test_make_vec_env_with_subprocess_workers():
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.rstrip().endswith("ok")
+
+
+def test_extras_give_ranges_and_ci_pins_exact_versions_within_them():
+    from pathlib import Path
+
+    import tomllib
+    from packaging.requirements import Requirement
+
+    root = Path(__file__).resolve().parents[1]
+    project = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))["project"]
+    extras = [Requirement(r) for reqs in project["optional-dependencies"].values() for r in reqs]
+    pinned = [str(r) for r in extras if any(s.operator in ("==", "===") for s in r.specifier)]
+    assert pinned == [], f"exact pins in the published extras: {pinned}"
+    lines = (root / ".ci" / "constraints.txt").read_text(encoding="utf-8").splitlines()
+    pins = {
+        Requirement(line).name: Requirement(line)
+        for line in lines
+        if line.strip() and not line.startswith("#")
+    }
+    assert all(
+        len(r.specifier) == 1 and next(iter(r.specifier)).operator == "==" for r in pins.values()
+    )
+    for requirement in extras:
+        if requirement.name in pins:
+            version = next(iter(pins[requirement.name].specifier)).version
+            assert requirement.specifier.contains(version), (requirement, version)
+    run = (root / ".ci" / "run").read_text(encoding="utf-8")
+    assert 'PIP_CONSTRAINT="$PWD/.ci/constraints.txt"' in run
