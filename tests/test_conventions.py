@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import pickle
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -227,3 +228,67 @@ def test_extras_give_ranges_and_ci_pins_exact_versions_within_them():
             assert requirement.specifier.contains(version), (requirement, version)
     run = (root / ".ci" / "run").read_text(encoding="utf-8")
     assert 'PIP_CONSTRAINT="$PWD/.ci/constraints.txt"' in run
+
+
+SDIST_INPUTS = (
+    "pyproject.toml", "MANIFEST.in", "README.md", "LICENSE", "CHANGELOG.md", "CITATION.cff",
+    "uav_formation_env", "baselines", "docs", "examples", "notebooks", "benchmarks", "tests",
+)  # fmt: skip
+
+
+def test_sdist_carries_what_the_tests_read_and_the_version_is_in_one_place(tmp_path):
+    """The sdist (built offline) holds docs/, examples/ and tests/; its version is
+    ``uav_formation_env.__version__``, which ``uav-formation --version`` prints."""
+    import importlib.metadata
+    import shutil
+    import subprocess
+    import sys
+    import tarfile
+
+    import uav_formation_env
+    from uav_formation_env.cli import main
+
+    try:
+        setuptools_version = importlib.metadata.version("setuptools")
+    except importlib.metadata.PackageNotFoundError:
+        setuptools_version = "0"
+    if int(setuptools_version.split(".")[0]) < 77:  # as tests/test_packaging.py
+        pytest.skip(f"building offline needs setuptools >= 77, found {setuptools_version}")
+    root = Path(__file__).resolve().parents[1]
+    source = tmp_path / "source"
+    source.mkdir()
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "models")
+    for name in SDIST_INPUTS:
+        path = root / name
+        if path.is_dir():
+            shutil.copytree(path, source / name, ignore=ignore)
+        else:
+            shutil.copy2(path, source / name)
+    code = (
+        "import sys; from setuptools import build_meta; print(build_meta.build_sdist(sys.argv[1]))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path / "dist")],
+        cwd=source,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    name = done.stdout.strip().splitlines()[-1]
+    version = uav_formation_env.__version__
+    assert name == f"uav_formation_env-{version}.tar.gz"
+    with tarfile.open(tmp_path / "dist" / name) as sdist:
+        members = {m.split("/", 1)[1] for m in sdist.getnames() if "/" in m}
+    for expected in (
+        "docs/architecture.md",
+        "examples",
+        "tests/test_conventions.py",
+        "MANIFEST.in",
+    ):
+        assert any(m.startswith(expected) for m in members), expected
+    assert not any("__pycache__" in m for m in members)
+    assert "\nversion:" not in (root / "CITATION.cff").read_text(encoding="utf-8")
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0

@@ -431,6 +431,12 @@ def _add_common(parser: argparse.ArgumentParser, model_scenario: bool = False) -
     )
 
 
+def _version() -> str:
+    from uav_formation_env import __version__
+
+    return __version__
+
+
 def _add_overwrite(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--overwrite",
@@ -449,6 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="uav-formation", description=__doc__, formatter_class=_HelpFormatter
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     run = sub.add_parser(
         "run",
