@@ -38,7 +38,7 @@ from uav_formation_baselines.config import (
     parse_set,
     split_params,
 )
-from uav_formation_env.cli import OneLineParser, integer_at_least
+from uav_formation_env.cli import OneLineParser, integer_at_least, on_terminal
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import SCENARIOS, resolve_scenario, save_scenario
 from uav_formation_env.run_folder import run_folder
@@ -234,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
         threads=args.threads,
         overrides=parse_set(args.overrides),
         hyperparams=args.hyperparams,
-        progress=not args.no_progress,
+        progress=not args.no_progress and on_terminal(),
         stdout_log=args.log_stdout,
         overwrite=args.overwrite,
     )

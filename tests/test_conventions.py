@@ -292,3 +292,20 @@ def test_sdist_carries_what_the_tests_read_and_the_version_is_in_one_place(tmp_p
     with pytest.raises(SystemExit) as exit_:
         main(["--version"])
     assert exit_.value.code == 0
+
+
+def test_no_progress_bars_in_logs(tmp_path):
+    """Output to files or pipes (a log) gets no tqdm bars, without --quiet."""
+    import subprocess
+    import sys
+
+    argv = ["evaluate", "--policy", "heuristic", "--seeds", "1", "--duration", "2"]
+    done = subprocess.run(
+        [sys.executable, "-m", "uav_formation_env.cli", *argv, "--out", str(tmp_path / "e")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "%|" not in done.stderr and "step/s" not in done.stderr, done.stderr[-500:]
+    assert "mission completed" in done.stdout

@@ -33,6 +33,15 @@ class UserError(Exception):
     """A mistake in the command line's input, printed as one line."""
 
 
+def on_terminal() -> bool:
+    """Both stdout and stderr are terminals: progress bars only there, never in logs."""
+    return sys.stdout.isatty() and sys.stderr.isatty()
+
+
+def _progress(args: argparse.Namespace) -> bool:
+    return not args.quiet and on_terminal()
+
+
 def _run(args: argparse.Namespace) -> int:
     """One heuristic episode: the evaluation runner with the consensus controller."""
     from uav_formation_env.evaluation import json_ready
@@ -60,7 +69,7 @@ def _run_into(args: argparse.Namespace, scenario, out: Path) -> dict:
         HeuristicPolicy(scenario),
         [args.seed],
         policy_name="heuristic",
-        progress=not args.quiet,
+        progress=_progress(args),
         desc="run (heuristic)",
     )
     write_records(batch, out / "trajectory.csv")
@@ -198,7 +207,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                     seeds,
                     algo=args.algo,
                     chunk_size=args.chunk_size,
-                    progress=not args.quiet,
+                    progress=_progress(args),
                     desc=desc + " (ray)",
                 )
             ]
@@ -215,7 +224,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             policy,
             seeds,
             policy_name=args.policy + (" + shield" if args.shield else ""),
-            progress=not args.quiet,
+            progress=_progress(args),
             desc=desc,
             **options,
         )
@@ -279,7 +288,7 @@ def _render(args: argparse.Namespace) -> int:
             policy_name=args.policy,
             fps=args.fps,
             every=args.every,
-            progress=not args.quiet,
+            progress=_progress(args),
         )
     print(f"wrote {out}")
     return 0
@@ -295,7 +304,7 @@ def _reproduce(args: argparse.Namespace) -> int:
             scenario=args.scenario,
             duration=_duration(args),
             jobs=args.jobs,
-            progress=not args.quiet,
+            progress=_progress(args),
             records=args.records,
             game_variants=[] if args.game_variants == ["none"] else args.game_variants,
             backend=args.backend,
@@ -398,7 +407,9 @@ def _add_common(parser: argparse.ArgumentParser, model_scenario: bool = False) -
     parser.add_argument(
         "--quick", action="store_true", help="20 s episodes (smoke test; --duration wins)"
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--quiet", action="store_true", help="no progress bar (none where output is not a terminal)"
+    )
     parser.add_argument(
         "--backend",
         choices=["local", "ray", "torch"],
