@@ -236,6 +236,7 @@ TABLE: list[tuple[str, Callable[[], object], type[BaseException], str]] = [
         r"unknown optimizer 'lbfgs'",
     ),
     ("policy: NaN observation", dmpc_act(NAN_OBS), ValueError, r"NaN.*copy 0, uav_2"),
+    ("policy: observation 1e20 out of range", dmpc_act(np.full((1, 5, 47), 1e20)), ValueError, r"outside the observation space .*copy 0, uav_0, slot 0 = 1e\+20"),
     (
         "policy: observation of a wrong shape",
         dmpc_act(NAN_OBS[:, :, :10]),
