@@ -23,7 +23,6 @@ if GYM_ID not in gymnasium.registry:
     )
 
 
-
 def _preload_in_forkserver() -> None:
     """Import this package in multiprocessing's fork server, so that workers forked from it
     (SB3's ``SubprocVecEnv``, Gymnasium's ``AsyncVectorEnv`` on Linux) know ``GYM_ID`` even
