@@ -349,6 +349,7 @@ CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("shield on ray", lambda t: ["evaluate", "--backend", "ray", "--shield", "--duration", "1"], r"--shield is not available with --backend ray"),
     ("evaluate onto an earlier run", lambda t: ["evaluate", "--policy", "heuristic", "--duration", "1", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
     ("reproduce onto an earlier run", lambda t: ["reproduce", "--quick", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
+    ("train onto an earlier run", lambda t: ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
     ("run onto an earlier run", lambda t: ["run", "--out", str(earlier_run(t))], r"--out .* is not empty"),
     ("overwrite a folder no run wrote", lambda t: ["evaluate", "--policy", "heuristic", "--duration", "1", "--overwrite", "--out", str(foreign_folder(t))], r"no uav-formation run wrote"),
     ("render onto an existing file", lambda t: ["render", "--duration", "1", "--policy", "heuristic", "--out", str(existing_gif(t))], r"exists; pass --overwrite"),
