@@ -68,6 +68,9 @@ class BenchmarlRunConfig:
         train_batch, optimizer_steps, memory: off-policy batch size, gradient steps per
             iteration and replay capacity (env steps) [-].
         gamma: discount [-].
+        eval_episodes: episodes of BenchMARL's evaluation (deterministic actions) at the first
+            and last iteration, written as marl-eval JSON (``create_json``) into BenchMARL's
+            experiment folder; 0 = no evaluation [-].
         task: options of the task (``UavFormationTaskConfig``: scenario overrides, reward,
             divergence and corridor, backend).
     """
@@ -84,6 +87,7 @@ class BenchmarlRunConfig:
     optimizer_steps: int = 200
     memory: int = 300_000
     gamma: float = 0.99
+    eval_episodes: int = 0
     task: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -101,6 +105,10 @@ class BenchmarlRunConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        if isinstance(self.eval_episodes, bool) or not isinstance(self.eval_episodes, int):
+            raise ValueError(f"eval_episodes must be an integer >= 0, got {self.eval_episodes!r}")
+        if self.eval_episodes < 0:
+            raise ValueError(f"eval_episodes must be an integer >= 0, got {self.eval_episodes!r}")
         if self.frames_per_batch % self.envs:
             raise ValueError(
                 f"frames_per_batch ({self.frames_per_batch}) must be a multiple of envs "
@@ -165,9 +173,15 @@ def make_experiment(
     experiment_config.off_policy_train_batch_size = config.train_batch
     experiment_config.off_policy_n_optimizer_steps = config.optimizer_steps
     experiment_config.off_policy_memory_size = config.memory
-    experiment_config.evaluation = experiment_config.render = False
+    experiment_config.render = False
+    # marl-eval's JSON (BenchMARL's create_json) holds the evaluations: first and last iteration
+    evaluate = config.eval_episodes > 0
+    experiment_config.evaluation = experiment_config.create_json = evaluate
+    experiment_config.evaluation_episodes = max(config.eval_episodes, 1)
+    batches = -(-config.frames // config.frames_per_batch)  # iterations, rounded up
+    experiment_config.evaluation_interval = batches * config.frames_per_batch
+    experiment_config.evaluation_deterministic_actions = True
     experiment_config.loggers = ["csv"]
-    experiment_config.create_json = False
     experiment_config.checkpoint_interval = 0
     experiment_config.checkpoint_at_end = False
     experiment_config.save_folder = str(folder)

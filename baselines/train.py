@@ -14,6 +14,11 @@ heldout_report`), ``config.yaml`` (resolved hyper-parameters, scenario, seed, ti
 time), ``scenario.yaml`` (the evaluated scenario), ``progress.csv`` and ``tensorboard/`` (SB3
 logger), and with evaluation on ``evaluations.csv`` and ``best/`` (model and statistics of the
 best evaluation), with checkpoints on ``checkpoints/<steps>/``.
+
+The run is written beside ``--out`` and moved into place when it ends
+(:mod:`uav_formation_env.run_folder`): a non-empty ``--out`` needs ``--overwrite``. Ctrl-C
+(SIGINT) ends training early and saves the model reached, with ``interrupted: true`` in
+``config.yaml``; a second Ctrl-C while saving leaves ``--out`` as it was.
 """
 
 from __future__ import annotations
@@ -35,10 +40,11 @@ from uav_formation_baselines.config import (
     parse_set,
     split_params,
 )
-from uav_formation_env.cli import OneLineParser, integer_at_least
+from uav_formation_env.cli import OneLineParser, integer_at_least, on_terminal
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import SCENARIOS, resolve_scenario, save_scenario
 from uav_formation_env.evaluation.heldout import HELDOUT_SEEDS
+from uav_formation_env.run_folder import run_folder
 
 
 def scenario_key(scenario: str | Path | Scenario) -> str:
@@ -80,6 +86,7 @@ def train(
     hyperparams: str | Path | None = None,
     progress: bool = True,
     stdout_log: bool = False,
+    overwrite: bool = False,
 ) -> dict[str, Any]:
     """Train one run and save it to ``out`` (see the module docstring); returns its config.
 
@@ -95,17 +102,11 @@ def train(
         hyperparams: YAML file (None: ``baselines/hyperparams/<algo>.yml``).
         progress: show a progress bar.
         stdout_log: also print SB3's log tables.
+        overwrite: replace an earlier run at ``out``.
     """
     import torch
 
     torch.set_num_threads(int(threads))
-    from uav_formation_baselines.callbacks import (
-        CheckpointCallback,
-        FormationEvalCallback,
-        save_run,
-    )
-    from uav_formation_baselines.wrappers import make_training_env
-
     cls = algorithm_class(algo)
     key = scenario_key(scenario)
     scen = resolve_scenario(scenario)
@@ -114,8 +115,38 @@ def train(
     if copies is not None:
         params["copies"] = int(copies)
     training, algo_kwargs = split_params(params, cls)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    with run_folder(out, overwrite=overwrite, command="train") as folder:
+        model, base, wall, interrupted = _learn(
+            cls, scen, training, algo_kwargs, folder, timesteps, seed, progress, stdout_log
+        )
+        config = {
+            "algo": algo.lower(),
+            "scenario": key,
+            "seed": int(seed),
+            "timesteps_requested": int(timesteps),
+            "timesteps": int(model.num_timesteps),
+            "interrupted": interrupted,
+            "num_envs": int(base.num_envs),
+            "wall_time_s": round(wall, 2),
+            "agent_steps_per_s": round(model.num_timesteps / max(wall, 1e-9), 1),
+            "torch_threads": int(threads),
+            "hyperparams": params,
+            "versions": _versions(),
+        }
+        with open(folder / "config.yaml", "w", encoding="utf-8") as stream:
+            yaml.safe_dump(config, stream, sort_keys=False)
+    return config
+
+
+def _learn(cls, scen, training, algo_kwargs, out, timesteps, seed, progress, stdout_log):
+    """Train a model into the run folder ``out``; Ctrl-C ends training and saves the model
+    reached. Returns (model, training VecEnv, wall time [s], interrupted)."""
+    from uav_formation_baselines.callbacks import (
+        CheckpointCallback,
+        FormationEvalCallback,
+        save_run,
+    )
+    from uav_formation_baselines.wrappers import make_training_env
 
     env, base = make_training_env(scen, training, gamma=float(algo_kwargs.get("gamma", 0.99)))
     model = cls(training["policy"], env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
@@ -131,27 +162,17 @@ def train(
         callbacks.append(CheckpointCallback(training["checkpoint_freq"], out))
 
     start = time.perf_counter()
-    model.learn(total_timesteps=int(timesteps), callback=callbacks, progress_bar=progress)
+    interrupted = False
+    try:
+        model.learn(total_timesteps=int(timesteps), callback=callbacks, progress_bar=progress)
+    except KeyboardInterrupt:
+        interrupted = True  # save the model reached; the run folder is still moved into place
     wall = time.perf_counter() - start
     save_run(model, out)
     save_scenario(scen, out / "scenario.yaml")
-    config = {
-        "algo": algo.lower(),
-        "scenario": key,
-        "seed": int(seed),
-        "timesteps_requested": int(timesteps),
-        "timesteps": int(model.num_timesteps),
-        "num_envs": int(base.num_envs),
-        "wall_time_s": round(wall, 2),
-        "agent_steps_per_s": round(model.num_timesteps / wall, 1),
-        "torch_threads": int(threads),
-        "hyperparams": params,
-        "versions": _versions(),
-    }
-    with open(out / "config.yaml", "w", encoding="utf-8") as stream:
-        yaml.safe_dump(config, stream, sort_keys=False)
+    model.logger.close()  # its files are complete before the folder moves into place
     env.close()
-    return config
+    return model, base, wall, interrupted
 
 
 def _versions() -> dict[str, str]:
@@ -224,6 +245,7 @@ def build_parser(
         default=len(HELDOUT_SEEDS),
         help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
     )
+    parser.add_argument("--overwrite", action="store_true", help="replace an earlier run at --out")
     return parser
 
 
@@ -277,9 +299,16 @@ def main(
         threads=args.threads,
         overrides=parse_set(args.overrides),
         hyperparams=args.hyperparams,
-        progress=not args.no_progress,
+        progress=not args.no_progress and on_terminal(),
         stdout_log=args.log_stdout,
+        overwrite=args.overwrite,
     )
+    if config["interrupted"]:
+        print(
+            f"interrupted at {config['timesteps']} agent-steps; saved that model to {args.out}",
+            file=sys.stderr,
+        )
+        return 130
     print(
         f"trained {config['algo']} for {config['timesteps']} agent-steps in "
         f"{config['wall_time_s']:.0f} s ({config['agent_steps_per_s']:.0f}/s); wrote {args.out}"

@@ -9,6 +9,7 @@ and never show a traceback.
 from __future__ import annotations
 
 import re
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,10 +19,13 @@ import pytest
 from uav_formation_env import env as aec_env
 from uav_formation_env import parallel_env
 from uav_formation_env.cli import main
+from uav_formation_env.config import DynamicsConfig, ObserverConfig, Scenario
 from uav_formation_env.config_io import resolve_scenario, scenario_from_dict, with_overrides
 from uav_formation_env.evaluation import make_policy, run_episodes
 from uav_formation_env.extras import MissingExtraError
 from uav_formation_env.policies import NashDMPCPolicy
+from uav_formation_env.run_folder import MARKER
+from uav_formation_env.scenarios import make_scenario
 
 ZERO = np.zeros(3, dtype=np.float32)
 
@@ -63,6 +67,31 @@ def vec(**kwargs):
     from uav_formation_env import vec_env
 
     return vec_env("paper", **kwargs)
+
+
+def stiff_observer_steps(steps: int) -> None:
+    """Gains that pass the tick bound together but still diverge: the run-time check names it."""
+    e = parallel_env(
+        observer__rho=10.0, observer__eta=20.0, observer__pi2=10.0, observer__substeps=16
+    )
+    e.reset(seed=0)
+    for _ in range(steps):
+        e.step({a: np.ones(3, np.float32) for a in e.agents})
+
+
+def done_aec():
+    e = aec_env(max_cycles=1)
+    e.reset(seed=0)
+    for _ in range(5):
+        e.step(ZERO)
+    return e
+
+
+def corrupt(name: str) -> Path:
+    folder = Path(tempfile.mkdtemp())
+    path = folder / name
+    path.write_bytes(np.random.default_rng(0).bytes(3000))
+    return path
 
 
 GOOD_OBS = parallel_env("paper").reset(seed=0)[0]
@@ -127,7 +156,20 @@ TABLE: list[tuple[str, Callable[[], object], type[BaseException], str]] = [
         ValueError,
         r"'observer\.enabled'.*true/false",
     ),
+    ("negative max_cycles", lambda: parallel_env(max_cycles=-1), ValueError, r"'episode\.max_cycles'.*>= 0"),
+    ("fractional max_cycles", lambda: parallel_env(max_cycles=2.5), ValueError, r"'episode\.max_cycles'"),
+    ("observer tick too long: dt", lambda: parallel_env(dynamics__dt=4.0, duration=200.0), ValueError, r"'observer\.substeps'.*= 0\.2 s must be <= 0\.111 s"),
+    ("observer tick too long: one substep", lambda: parallel_env(observer__substeps=1), ValueError, r"'observer\.substeps'.*use observer\.substeps >= 2"),
+    ("more UAVs than the start sampler places", lambda: make_scenario(n_uav=100), ValueError, r"'initial\.min_spacing'.*100 UAVs .*start sampler places at most 75"),
+    ("obstacle over the start box", scenario({"avoidance": {"obstacles": [{"center": [20.0, 0.0], "radius": 10.0}]}}), ValueError, r"'avoidance\.obstacles\[0\]'.*start box"),
+    ("horizon of a million steps", scenario({"cost": {"horizon": 10**6}}), ValueError, r"'cost\.horizon'.*\[1, 1000\]"),
+    ("Scenario(dynamics=dict)", lambda: Scenario(dynamics={"dt": 0.1}), ValueError, r"'dynamics'.*DynamicsConfig, got dict"),
+    ("Scenario(duration=str)", lambda: Scenario(duration="10"), ValueError, r"'duration'.*number, got '10'"),
+    ("Scenario(name=int)", lambda: Scenario(name=3), ValueError, r"'name'.*string, got 3"),
+    ("ObserverConfig(enabled=str)", lambda: Scenario(observer=ObserverConfig(enabled="yes")), ValueError, r"'observer\.enabled'.*true/false"),
+    ("DynamicsConfig(dt=str)", lambda: DynamicsConfig(dt="0.1"), ValueError, r"'dynamics\.dt'.*number"),
     # ---- YAML
+    ("YAML duplicate key", yaml_file("observer:\n  rho: 2.0\n  rho: 3.0\n"), ValueError, r"line 3.*duplicate key 'rho'"),
     ("malformed YAML", yaml_file("duration: [1, 2\n"), ValueError, r"not valid YAML at line \d"),
     ("YAML list at top level", yaml_file("- 1\n- 2\n"), ValueError, r"expected a mapping"),
     ("YAML unknown key", yaml_file("observer:\n  gain: 2\n"), ValueError, r"'observer\.gain'"),
@@ -164,6 +206,9 @@ TABLE: list[tuple[str, Callable[[], object], type[BaseException], str]] = [
     ),
     ("unknown agent's action", step(actions(uav_7=ZERO)), ValueError, r"unknown agent.*uav_7"),
     ("step before reset", lambda: parallel_env().step(actions()), RuntimeError, r"reset\(\)"),
+    ("observer diverging with stiff gains", lambda: stiff_observer_steps(5), ValueError, r"observer diverged .* raise observer\.substeps"),
+    ("AEC step before reset", lambda: aec_env().step(ZERO), RuntimeError, r"call reset\(\) before step"),
+    ("AEC action for a done agent", lambda: done_aec().step(ZERO), ValueError, r"uav_0 is done .* must be None"),
     ("vec_env fractional copies", lambda: vec(num_copies=2.7), TypeError, r"num_copies.*2\.7"),
     ("vec_env zero copies", lambda: vec(num_copies=0), ValueError, r"num_copies.*>= 1, got 0"),
     ("vec_env negative seed", lambda: vec(num_copies=2).seed(-1), ValueError, r"seed .* -1"),
@@ -181,6 +226,7 @@ TABLE: list[tuple[str, Callable[[], object], type[BaseException], str]] = [
         r"unknown optimizer 'lbfgs'",
     ),
     ("policy: NaN observation", dmpc_act(NAN_OBS), ValueError, r"NaN.*copy 0, uav_2"),
+    ("policy: observation 1e20 out of range", dmpc_act(np.full((1, 5, 47), 1e20)), ValueError, r"outside the observation space .*copy 0, uav_0, slot 0 = 1e\+20"),
     (
         "policy: observation of a wrong shape",
         dmpc_act(NAN_OBS[:, :, :10]),
@@ -200,6 +246,7 @@ TABLE: list[tuple[str, Callable[[], object], type[BaseException], str]] = [
         FileNotFoundError,
         r"file not found: 'runs/missing/model\.zip'",
     ),
+    ("corrupt TorchScript file", lambda: make_policy(str(corrupt("policy.pt")), resolve_scenario("paper")), ValueError, r"cannot load the model '.*policy\.pt' \(corrupt"),
     (
         "unknown policy name",
         lambda: make_policy("foo", resolve_scenario("paper")),
@@ -243,6 +290,27 @@ def malformed_yaml(tmp_path: Path) -> str:
     return str(path)
 
 
+def earlier_run(tmp_path: Path) -> Path:
+    out = tmp_path / "earlier"
+    out.mkdir()
+    (out / "summary.json").write_text("{}", encoding="utf-8")
+    (out / MARKER).write_text("{}", encoding="utf-8")
+    return out
+
+
+def foreign_folder(tmp_path: Path) -> Path:
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("not a run", encoding="utf-8")
+    return out
+
+
+def existing_gif(tmp_path: Path) -> Path:
+    out = tmp_path / "episode.gif"
+    out.write_bytes(b"GIF89a")
+    return out
+
+
 # (id, argv (tmp_path -> list), pattern of the one error line)
 CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("zero seeds", lambda t: ["evaluate", "--seeds", "0"], r"--seeds: expected an integer >= 1"),
@@ -268,6 +336,12 @@ CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("counter draws on ray", lambda t: ["evaluate", "--backend", "ray", "--random-source", "counter", "--duration", "1"], r"--random-source counter is not available with --backend ray"),
     ("shield on the full layout", lambda t: ["evaluate", "--policy", "heuristic", "--shield", "--duration", "1"], r"safety shield reads the local observation layout.*'full'"),
     ("shield on ray", lambda t: ["evaluate", "--backend", "ray", "--shield", "--duration", "1"], r"--shield is not available with --backend ray"),
+    ("evaluate onto an earlier run", lambda t: ["evaluate", "--policy", "heuristic", "--duration", "1", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
+    ("reproduce onto an earlier run", lambda t: ["reproduce", "--quick", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
+    ("train onto an earlier run", lambda t: ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
+    ("run onto an earlier run", lambda t: ["run", "--out", str(earlier_run(t))], r"--out .* is not empty"),
+    ("overwrite a folder no run wrote", lambda t: ["evaluate", "--policy", "heuristic", "--duration", "1", "--overwrite", "--out", str(foreign_folder(t))], r"no uav-formation run wrote"),
+    ("render onto an existing file", lambda t: ["render", "--duration", "1", "--policy", "heuristic", "--out", str(existing_gif(t))], r"exists; pass --overwrite"),
     ("reproduce: counter draws on ray", lambda t: ["reproduce", "--backend", "ray", "--random-source", "counter", "--quick", "--out", str(t)], r"random='counter' is not available with backend='ray'"),
 ]  # fmt: skip
 
@@ -370,6 +444,7 @@ def test_config_validation_of_1000_uavs() -> None:
     offsets = [[float(i), 0.0, 0.0, 0.0, 0.0, 0.0] for i in range(n)]
     data = {"formation": {"offsets": offsets, "adjacency": adjacency.tolist()}}
     data["initial"] = {"position_low": [0, 0, 0], "position_high": [5000, 5000, 0]}
+    data["avoidance"] = {"obstacles": [{"center": [6000.0, 0.0], "radius": 30.0}]}
     assert with_overrides(resolve_scenario("paper"), data).n_uav == n
     adjacency[:2] = 0  # uav_0 and uav_1 hear nobody: neither reaches the other
     data["formation"]["adjacency"] = adjacency.tolist()

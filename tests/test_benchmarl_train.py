@@ -82,3 +82,24 @@ def test_cli_reports_bad_settings_in_one_line(tmp_path: Path, capsys) -> None:
     assert capsys.readouterr().err.strip().splitlines() == [
         "error: envs must be an integer >= 1, got 0"
     ]
+
+
+def test_marl_eval_json_of_the_evaluations(tmp_path: Path) -> None:
+    """``eval_episodes`` > 0: BenchMARL writes marl-eval's JSON (env -> task -> algorithm ->
+    seed -> step -> metrics lists) of its first and last evaluation."""
+    import json
+
+    sets = [f"{k}={v}" for k, v in TINY.items() if k != "task"]
+    sets += ["task.duration=20.0", "eval_episodes=2"]
+    assert main(["--algo", "ippo", "--out", str(tmp_path), "--set", *sets]) == 0
+    (path,) = (tmp_path / "benchmarl").glob("*/*.json")
+    data = json.loads(path.read_text())
+    (env,) = data.values()
+    (task,) = env.values()
+    (algorithm,) = task.values()
+    assert list(algorithm) == ["seed_0"]
+    steps = {k: v for k, v in algorithm["seed_0"].items() if k.startswith("step_")}
+    assert len(steps) == 2  # the first and the last iteration
+    for step in steps.values():
+        assert len(step["return"]) == 2  # one per evaluation episode
+        assert all(np.isfinite(step["return"]))

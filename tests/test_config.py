@@ -137,7 +137,7 @@ def test_yaml_round_trip_non_default(tmp_path: Path) -> None:
             adjacency=((0, 0, 0), (1, 0, 0), (0, 1, 0)),
             mirrored_offsets=True,
         ),
-        avoidance=AvoidanceConfig(obstacles=(ObstacleConfig((10.0, 20.0), 5.0),)),
+        avoidance=AvoidanceConfig(obstacles=(ObstacleConfig((100.0, 20.0), 5.0),)),
         cost=CostConfig(q=2.0, horizon=3),
         schedule=ScheduleConfig(times=(5.0,), velocities=((1, 2, 3), (4, 5, 6))),
         initial=InitialStateConfig(velocity=(15.0, 1.0, 0.0)),
@@ -456,8 +456,8 @@ def test_with_overrides_forms() -> None:
     s2 = with_overrides(base, {"observer": ObserverConfig(eta=0.7)})
     assert s2.observer == ObserverConfig(eta=0.7)
     # obstacles as objects
-    s3 = with_overrides(base, {"avoidance.obstacles": (ObstacleConfig((5.0, 5.0), 10.0),)})
-    assert s3.avoidance.obstacles == (ObstacleConfig((5.0, 5.0), 10.0),)
+    s3 = with_overrides(base, {"avoidance.obstacles": (ObstacleConfig((95.0, 5.0), 10.0),)})
+    assert s3.avoidance.obstacles == (ObstacleConfig((95.0, 5.0), 10.0),)
 
 
 def test_with_overrides_rejects_unknown_and_invalid() -> None:

@@ -285,7 +285,7 @@ def test_cli_evaluate_flies_a_model_on_its_own_scenario(tmp_path: Path, capsys) 
     assert "2 s episodes" in capsys.readouterr().out  # the run's scenario.yaml, not the paper's
     # another scenario (the paper's, full layout of 47 values) is flown through the model's own
     # 95-value local layout, as uav_formation_baselines.results does
-    paper = [*argv, "--scenario", "paper", "--duration", "2", "--out", str(out)]
+    paper = [*argv, "--scenario", "paper", "--duration", "2", "--out", str(out), "--overwrite"]
     assert cli_main(paper) == 0
     assert "local observation" in capsys.readouterr().out
     # a full-layout model (its size depends on N) cannot fly another N: one error line

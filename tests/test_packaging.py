@@ -154,8 +154,12 @@ def test_repository_files():
     citation = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
     assert str(citation["cff-version"]) == "1.2.0"
     assert citation["license"] == "MIT"
+    # the version is written once: uav_formation_env.__version__ (pyproject.toml reads it)
+    import uav_formation_env
+
     project = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
-    assert f'version = "{citation["version"]}"' in project
+    assert 'dynamic = ["version"]' in project and "uav_formation_env.__version__" in project
+    assert "version" not in citation
     changelog = (ROOT / "CHANGELOG.md").read_text(encoding="utf-8")
     assert "## [Unreleased]" in changelog
-    assert f"## [{citation['version']}]" in changelog
+    assert f"## [{uav_formation_env.__version__}]" in changelog

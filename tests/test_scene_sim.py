@@ -188,8 +188,10 @@ def test_one_observation_space_for_every_n_with_the_local_layout():
     for seed in range(6):
         obs, _ = swarm.reset(seed=seed)
         n = draw_scene(swarm.scenario, np.random.default_rng(seed)).n_uav
-        assert swarm.agents == [f"uav_{i}" for i in range(n)] and len(obs) == n
+        assert swarm.agents == [f"uav_{i}" for i in range(n)]
+        assert list(obs) == swarm.possible_agents  # absent agents: zero observations
         assert all(o.shape == shape for o in obs.values())
+        assert all(not obs[a].any() for a in swarm.possible_agents[n:])
         sizes.add(n)
     assert len(sizes) > 1
     with warnings.catch_warnings():

@@ -228,3 +228,48 @@ def test_bad_config_names_the_field(values, pattern) -> None:
 def test_shield_needs_the_local_layout() -> None:
     with pytest.raises(ValueError, match=r"observation\.kind = 'full'"):
         SafetyShield(_Constant((0, 0, 0)), resolve_scenario("paper"))
+
+
+def _random_feasible_problems(rng: np.random.Generator, count: int, k: int):
+    """``count`` projections onto ``k`` random half-spaces and a random box that share a point."""
+    half_width = rng.uniform(0.3, 1.0, (count, 3))
+    inside = rng.uniform(-0.9, 0.9, (count, 3)) * half_width
+    normal = rng.normal(size=(count, k, 3))
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    bound = np.einsum("mkc,mc->mk", normal, inside) - rng.uniform(0.0, 0.3, (count, k))
+    x0 = rng.uniform(-1.5, 1.5, (count, 3))
+    return x0, normal, bound, half_width
+
+
+def test_projection_is_exact_against_scipy_slsqp() -> None:
+    """400 random feasible problems with 8 half-spaces: the projection meets every constraint
+    to rounding, is never farther from x0 than SLSQP's answer, and equals it to SLSQP's
+    tolerance."""
+    scipy_optimize = pytest.importorskip("scipy.optimize")
+    rng = np.random.default_rng(40)
+    x0, normal, bound, half_width = _random_feasible_problems(rng, 400, 8)
+    x = project_onto_halfspaces(x0, normal, bound, half_width, 100)
+    violation = np.maximum(bound - np.einsum("mkc,mc->mk", normal, x), 0.0).max()
+    assert violation <= 1e-9 and (np.abs(x) <= half_width + 1e-12).all()
+    worst = 0.0
+    for m in range(len(x0)):
+        reference = scipy_optimize.minimize(
+            lambda y, m=m: float(np.sum((y - x0[m]) ** 2)),
+            np.zeros(3),
+            jac=lambda y, m=m: 2.0 * (y - x0[m]),
+            bounds=list(zip(-half_width[m], half_width[m], strict=True)),
+            constraints=[
+                {
+                    "type": "ineq",
+                    "fun": lambda y, m=m: normal[m] @ y - bound[m],
+                    "jac": lambda y, m=m: normal[m],
+                }
+            ],
+            method="SLSQP",
+            options={"ftol": 1e-14, "maxiter": 500},
+        )
+        assert reference.success, reference.message
+        mine, theirs = np.sum((x[m] - x0[m]) ** 2), np.sum((reference.x - x0[m]) ** 2)
+        assert mine <= theirs + 1e-9
+        worst = max(worst, float(np.abs(x[m] - reference.x).max()))
+    assert worst < 1e-5

@@ -27,4 +27,22 @@ for _id, _kwargs in ((GYM_ID, {}), (TRAIN_GYM_ID, {"reward": "train"})):
             kwargs=_kwargs,
         )
 
+
+def _preload_in_forkserver() -> None:
+    """Import this package in multiprocessing's fork server, so that workers forked from it
+    (SB3's ``SubprocVecEnv``, Gymnasium's ``AsyncVectorEnv`` on Linux) know ``GYM_ID`` even
+    when ``__main__`` does not import it (``python -c``, notebooks, pytest). Appends to the
+    preload list; no effect once the fork server runs, or where there is none."""
+    try:
+        from multiprocessing import forkserver
+
+        preload = list(getattr(forkserver._forkserver, "_preload_modules", ["__main__"]))
+        if __name__ not in preload:
+            forkserver.set_forkserver_preload([*preload, __name__])
+    except (ImportError, AttributeError, ValueError):  # no fork server on this platform
+        pass
+
+
+_preload_in_forkserver()
+
 __all__ = ["GYM_ID", "TRAIN_GYM_ID", "__version__", "env", "parallel_env", "vec_env"]

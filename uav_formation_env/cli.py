@@ -30,33 +30,50 @@ from pathlib import Path
 import numpy as np
 
 from uav_formation_env.config_io import SCENARIOS, resolve_scenario, with_overrides
+from uav_formation_env.run_folder import atomic_file, check_out, run_folder
 
 
 class UserError(Exception):
     """A mistake in the command line's input, printed as one line."""
 
 
+def on_terminal() -> bool:
+    """Both stdout and stderr are terminals: progress bars only there, never in logs."""
+    return sys.stdout.isatty() and sys.stderr.isatty()
+
+
+def _progress(args: argparse.Namespace) -> bool:
+    return not args.quiet and on_terminal()
+
+
 def _run(args: argparse.Namespace) -> int:
     """One heuristic episode: the evaluation runner with the consensus controller."""
+    from uav_formation_env.evaluation import json_ready
+
+    scenario = resolve_scenario(args.scenario)
+    if args.observer is not None:
+        scenario = with_overrides(scenario, {"observer.enabled": args.observer == "on"})
+    with run_folder(args.out, overwrite=args.overwrite, command="run") as out:
+        summary = _run_into(args, scenario, out)
+    print(json.dumps(json_ready(summary), indent=2))
+    return 0
+
+
+def _run_into(args: argparse.Namespace, scenario, out: Path) -> dict:
     from uav_formation_env.evaluation import (
         HeuristicPolicy,
-        json_ready,
         run_episodes,
         write_json,
         write_records,
     )
     from uav_formation_env.plotting import plot_trajectories
 
-    scenario = resolve_scenario(args.scenario)
-    if args.observer is not None:
-        scenario = with_overrides(scenario, {"observer.enabled": args.observer == "on"})
-    out = _out_dir(args.out)
     batch = run_episodes(
         scenario,
         HeuristicPolicy(scenario),
         [args.seed],
         policy_name="heuristic",
-        progress=not args.quiet,
+        progress=_progress(args),
         desc="run (heuristic)",
     )
     write_records(batch, out / "trajectory.csv")
@@ -78,8 +95,7 @@ def _run(args: argparse.Namespace) -> int:
         "events": sorted(events, key=lambda e: e["t"]),
     }
     write_json(summary, out / "summary.json")
-    print(json.dumps(json_ready(summary), indent=2))
-    return 0
+    return summary
 
 
 def _model_scenario(policy: str) -> str | Path:
@@ -123,15 +139,6 @@ def _duration(args: argparse.Namespace) -> float | None:
 
 def _seeds(args: argparse.Namespace) -> list[int]:
     return list(range(args.seed_start, args.seed_start + args.seeds))
-
-
-def _out_dir(path: str) -> Path:
-    """``--out`` as a directory (created); a user error if it names a file."""
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"--out {path!r} is a file; expected a directory (it will be created)")
-    out.mkdir(parents=True, exist_ok=True)
-    return out
 
 
 def _mission_lines(summary: dict) -> list[str]:
@@ -179,7 +186,6 @@ def _evaluate(args: argparse.Namespace) -> int:
         raise ValueError(f"--device {args.device} needs --backend torch")
     scenario = _scenario_for(args)
     seeds = _seeds(args)
-    out = _out_dir(args.out)
     desc = f"evaluate {Path(args.policy).name} x {len(seeds)} seeds"
     low, high = n_uav_range(scenario)
     if args.backend == "ray":
@@ -195,6 +201,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         if args.shield:
             raise ValueError("--shield is not available with --backend ray; use --backend local")
         make_policy(args.policy, scenario, algo=args.algo)  # bad names fail here, not in a task
+        check_out(args.out, args.overwrite)  # before the episodes, which write nothing
         with ray_session(args.address):
             batches = [
                 run_episodes_ray(
@@ -203,7 +210,7 @@ def _evaluate(args: argparse.Namespace) -> int:
                     seeds,
                     algo=args.algo,
                     chunk_size=args.chunk_size,
-                    progress=not args.quiet,
+                    progress=_progress(args),
                     desc=desc + " (ray)",
                 )
             ]
@@ -220,12 +227,13 @@ def _evaluate(args: argparse.Namespace) -> int:
         )
         if args.shield:
             policy = SafetyShield(policy, scenario)
+        check_out(args.out, args.overwrite)  # before the episodes, which write nothing
         batches = run_episode_groups(
             scenario,
             policy,
             seeds,
             policy_name=args.policy + (" + shield" if args.shield else ""),
-            progress=not args.quiet,
+            progress=_progress(args),
             desc=desc,
             **options,
         )
@@ -235,20 +243,21 @@ def _evaluate(args: argparse.Namespace) -> int:
             "config": asdict(policy.config),
             "intervention_rate": policy.intervention_rate,
         }
-    records = []
-    for batch in batches:  # one table per N: its rows are per UAV
-        name = "records.csv" if len(batches) == 1 else f"records_n{batch.z.shape[2]}.csv"
-        write_records(batch, out / name)
-        records.append(out / name)
-    write_json(summary, out / "summary.json")
-    batch = batches[0]
-    plot_trajectories(
-        batch.z[:, 0, :, :3],
-        scenario if batch.scenes is None else batch.scenes[0],  # the first seed's drawn scene
-        out / "trajectories.png",
-        title=f"{args.policy}{' + safety shield' if args.shield else ''}, observer "
-        f"{'on' if scenario.observer.enabled else 'off'}, seed {batch.seeds[0]}",
-    )
+    names = ["records.csv"] if len(batches) == 1 else []
+    if not names:  # one table per N: its rows are per UAV
+        names = [f"records_n{batch.z.shape[2]}.csv" for batch in batches]
+    with run_folder(args.out, overwrite=args.overwrite, command="evaluate") as out:
+        for batch, name in zip(batches, names, strict=True):
+            write_records(batch, out / name)
+        write_json(summary, out / "summary.json")
+        batch = batches[0]
+        plot_trajectories(
+            batch.z[:, 0, :, :3],
+            scenario if batch.scenes is None else batch.scenes[0],  # the first seed's scene
+            out / "trajectories.png",
+            title=f"{args.policy}{' + safety shield' if args.shield else ''}, observer "
+            f"{'on' if scenario.observer.enabled else 'off'}, seed {batch.seeds[0]}",
+        )
     observer = "on" if scenario.observer.enabled else "off"
     shielded = " behind the safety shield" if args.shield else ""
     print(
@@ -263,7 +272,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     if args.shield:
         rate = summary["shield"]["intervention_rate"]
         print(f"  safety shield changed the action on {100 * rate:.2f} % of UAV-steps")
-    written = [*records, out / "summary.json", out / "trajectories.png"]
+    written = [Path(args.out) / name for name in (*names, "summary.json", "trajectories.png")]
     print(f"wrote {', '.join(str(path) for path in written)}")
     return 0
 
@@ -277,39 +286,42 @@ def _render(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.is_dir():
         raise UserError(f"--out {args.out!r} is a directory; expected a .gif or .mp4 file name")
-    path = render_episode(
-        scenario,
-        policy,
-        args.seed,
-        out,
-        policy_name=args.policy,
-        fps=args.fps,
-        every=args.every,
-        progress=not args.quiet,
-    )
-    print(f"wrote {path}")
+    if out.suffix.lower() not in (".gif", ".mp4"):  # before the episode is flown
+        raise UserError(f"--out {args.out!r} must end in .gif or .mp4")
+    with atomic_file(out, overwrite=args.overwrite) as partial:
+        render_episode(
+            scenario,
+            policy,
+            args.seed,
+            partial,
+            policy_name=args.policy,
+            fps=args.fps,
+            every=args.every,
+            progress=_progress(args),
+        )
+    print(f"wrote {out}")
     return 0
 
 
 def _reproduce(args: argparse.Namespace) -> int:
     from uav_formation_env.reproduce import LABELS, reproduce
 
-    out = _out_dir(args.out)
-    result = reproduce(
-        out,
-        seeds=_seeds(args),
-        scenario=args.scenario,
-        duration=_duration(args),
-        jobs=args.jobs,
-        progress=not args.quiet,
-        records=args.records,
-        game_variants=[] if args.game_variants == ["none"] else args.game_variants,
-        backend=args.backend,
-        address=args.address,
-        chunk_size=args.chunk_size,
-        device=args.device,
-        random=args.random_source,
-    )
+    with run_folder(args.out, overwrite=args.overwrite, command="reproduce") as out:
+        result = reproduce(
+            out,
+            seeds=_seeds(args),
+            scenario=args.scenario,
+            duration=_duration(args),
+            jobs=args.jobs,
+            progress=_progress(args),
+            records=args.records,
+            game_variants=[] if args.game_variants == ["none"] else args.game_variants,
+            backend=args.backend,
+            address=args.address,
+            chunk_size=args.chunk_size,
+            device=args.device,
+            random=args.random_source,
+        )
     summary = result.summary
     print(f"wall time {summary['wall_time_s']:.1f} s ({len(summary['seeds'])} seeds)")
     for variant, s in summary["variants"].items():
@@ -331,7 +343,7 @@ def _reproduce(args: argparse.Namespace) -> int:
             f"error max {m['route_error_max_m']:.1f} m | collisions after t = 0 "
             f"{m['collisions_after_start']}"
         )
-    print(f"wrote {result.out}/table2.csv, nash_gap.csv, summary.json, REPORT.md and figures")
+    print(f"wrote {args.out}/table2.csv, nash_gap.csv, summary.json, REPORT.md and figures")
     duration, full = _duration(args), resolve_scenario(args.scenario).duration
     if duration is not None and duration < full:
         print(
@@ -408,7 +420,9 @@ def _add_common(parser: argparse.ArgumentParser, model_scenario: bool = False) -
     parser.add_argument(
         "--quick", action="store_true", help="20 s episodes (smoke test; --duration wins)"
     )
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--quiet", action="store_true", help="no progress bar (none where output is not a terminal)"
+    )
     parser.add_argument(
         "--backend",
         choices=["local", "ray", "torch"],
@@ -446,6 +460,21 @@ def plain_text(docstring: str) -> str:
     return re.sub(r":\w+:`([^`]*)`", r"\1", docstring).replace("``", "")
 
 
+def _version() -> str:
+    from uav_formation_env import __version__
+
+    return __version__
+
+
+def _add_overwrite(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an earlier run at --out (outputs are written beside it and moved into "
+        "place when the run is done; an interrupted or failed run leaves --out as it was)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     from uav_formation_env.policies.registry import POLICY_HELP
     from uav_formation_env.reproduce.nash_analysis import NASH_FIGURE
@@ -455,6 +484,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="uav-formation", description=plain_text(__doc__), formatter_class=_HelpFormatter
     )
     parser.add_argument("--debug", action="store_true", help="show tracebacks of errors")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     run = sub.add_parser(
         "run",
@@ -465,6 +495,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=integer_at_least(0), default=0, help="episode seed")
     run.add_argument("--observer", choices=["on", "off"], default=None, help="override")
     run.add_argument("--out", default="results/run", help="output directory")
+    _add_overwrite(run)
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
 
@@ -483,6 +514,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--observer", choices=["on", "off"], default=None, help="override the scenario's"
     )
     evaluate.add_argument("--out", default="results/eval", help="output directory")
+    _add_overwrite(evaluate)
     evaluate.add_argument(
         "--shield",
         action="store_true",
@@ -517,6 +549,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--every", type=integer_at_least(1), default=5, help="one frame every K steps"
     )
     render.add_argument("--out", default="results/episode.gif", help="a .gif or .mp4 file")
+    _add_overwrite(render)
     render.add_argument("--quiet", action="store_true", help="no progress bar")
     render.set_defaults(func=_render)
 
@@ -530,6 +563,7 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     reproduce.add_argument("--out", default="results/paper", help="output directory")
+    _add_overwrite(reproduce)
     reproduce.add_argument(
         "--jobs",
         type=integer_at_least(0),
@@ -632,8 +666,9 @@ def main(argv: list[str] | None = None) -> int:
             return _train(argv[1:])
         args = build_parser().parse_args(argv)
         return int(args.func(args))
-    except KeyboardInterrupt:
-        print("uav-formation: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as interrupt:
+        notes = "; ".join(getattr(interrupt, "__notes__", []))
+        print(f"uav-formation: interrupted{'; ' + notes if notes else ''}", file=sys.stderr)
         return 130
     except Exception as error:  # noqa: BLE001 - the CLI never shows a traceback unless asked
         if debug:

@@ -13,7 +13,8 @@ they are off by default.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+import typing
+from dataclasses import dataclass, field, fields, is_dataclass
 
 import numpy as np
 
@@ -26,6 +27,11 @@ def _require(condition: bool, field_name: str, rule: str) -> None:
 
 
 def _finite(value: float, field_name: str) -> None:
+    _require(
+        isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool),
+        field_name,
+        f"must be a number, got {value!r}",
+    )
     _require(math.isfinite(value), field_name, f"must be finite, got {value!r}")
 
 
@@ -372,6 +378,9 @@ class AvoidanceConfig:
         return obstacle.radius + self.safety_margin
 
 
+MAX_HORIZON = 1000  # longest MPC horizon [steps]: the populations grow as P x H x 3 per UAV
+
+
 @dataclass(frozen=True)
 class CostConfig:
     """Weights and horizon of the game cost J_i (eq. 6, docs/model.md §4).
@@ -408,9 +417,11 @@ class CostConfig:
         ):  # fmt: skip
             _non_negative(getattr(self, name), f"cost.{name}")
         _require(
-            isinstance(self.horizon, int) and self.horizon >= 1,
+            isinstance(self.horizon, int)
+            and not isinstance(self.horizon, bool)
+            and 1 <= self.horizon <= MAX_HORIZON,
             "cost.horizon",
-            f"must be an integer >= 1, got {self.horizon!r}",
+            f"must be an integer in [1, {MAX_HORIZON}], got {self.horizon!r}",
         )
         _require(
             isinstance(self.obstacle_lookahead, int)
@@ -448,6 +459,12 @@ class ScheduleConfig:
             "schedule.times",
             "must be strictly increasing",
         )
+
+
+# fraction of the volume bound (InitialStateConfig.capacity) that the start sampler fills
+# reliably in a box of 0..3 dimensions, a little under the fill it reached before failing
+# (1-d 0.68, 2-d 0.40-0.42, 3-d 0.22; docs/deviations.md)
+SAMPLER_FILL = (1.0, 0.62, 0.39, 0.2)
 
 
 @dataclass(frozen=True)
@@ -496,6 +513,16 @@ class InitialStateConfig:
         d = len(extents)
         ball = math.pi ** (d / 2) / math.gamma(d / 2 + 1) * (s / 2) ** d
         return math.prod(e + s for e in extents) / ball
+
+    def sampler_capacity(self) -> int:
+        """How many UAVs the start sampler (``core.initial.initial_positions``: redraws of the
+        close ones) places reliably: :meth:`capacity` times the fill it reaches in the box's
+        dimension (:data:`SAMPLER_FILL`, measured; docs/deviations.md)."""
+        bound = self.capacity()
+        if math.isinf(bound):
+            return 2**62
+        d = sum(hi > lo for lo, hi in zip(self.position_low, self.position_high))
+        return int(bound * SAMPLER_FILL[d])
 
 
 @dataclass(frozen=True)
@@ -667,6 +694,8 @@ class EpisodeConfig:
       b T / B; later resets start at 0). The state there is the one the ``start_controller``
       (the consensus PD ``"heuristic"``) reaches by flying the episode from t = 0, so that short
       rollouts see both obstacles and every turn.
+    - ``max_cycles``: truncate an episode after this many steps from its start (PettingZoo's
+      ``max_cycles``); 0 = off, episodes end at ``Scenario.duration``.
     """
 
     reward: str = "raw"  # "raw", "scaled" or "log1p"
@@ -683,6 +712,7 @@ class EpisodeConfig:
     action: str = "acceleration"
     velocity_range: float = 10.0  # set-point offset at |a| = 1 [m/s]
     velocity_gain: float = 1.0  # inner-loop gain of the velocity mode [1/s]
+    max_cycles: int = 0  # truncate after this many steps of an episode; 0 = off [steps]
 
     def __post_init__(self) -> None:
         _require(
@@ -711,6 +741,13 @@ class EpisodeConfig:
             self.start_controller in START_CONTROLLERS,
             "episode.start_controller",
             f"must be one of {START_CONTROLLERS}, got {self.start_controller!r}",
+        )
+        _require(
+            isinstance(self.max_cycles, int)
+            and not isinstance(self.max_cycles, bool)
+            and self.max_cycles >= 0,
+            "episode.max_cycles",
+            f"must be an integer >= 0 (0 = off), got {self.max_cycles!r}",
         )
 
 
@@ -924,6 +961,80 @@ def _route_extent(schedule: ScheduleConfig, duration: float) -> tuple[float, int
     return length, legs
 
 
+# the NFTSMO's explicit inner ticks stay bounded for h (rho + eta + pi2) up to this (measured:
+# the paper's gains diverge at h = 0.2 s, i.e. 0.9; docs/deviations.md)
+OBSERVER_TICK_BOUND = 0.5
+
+
+def _check_observer_tick(scenario: Scenario) -> None:
+    """The observer's tick h = dt / substeps short enough for its gains (else NaN estimates)."""
+    o = scenario.observer
+    if not o.enabled:
+        return
+    h, gain = scenario.dynamics.dt / o.substeps, o.rho + o.eta + o.pi2
+    needed = math.ceil(scenario.dynamics.dt * gain / OBSERVER_TICK_BOUND)
+    _require(
+        h * gain <= OBSERVER_TICK_BOUND,
+        "observer.substeps",
+        f"the observer's tick dynamics.dt / observer.substeps = {h:g} s must be <= "
+        f"{OBSERVER_TICK_BOUND / gain:.3g} s for its gains (h (rho + eta + pi2) <= "
+        f"{OBSERVER_TICK_BOUND}, else its estimate diverges); use observer.substeps >= {needed}",
+    )
+
+
+def _check_start_box_clear(scenario: Scenario) -> None:
+    """No obstacle (the scenario's own; drawn ones are placed clear of the start) reaches into
+    the horizontal start box."""
+    low, high = scenario.initial.position_low, scenario.initial.position_high
+    for k, obstacle in enumerate(scenario.avoidance.obstacles):
+        x, y = obstacle.center
+        dx = max(low[0] - x, 0.0, x - high[0])
+        dy = max(low[1] - y, 0.0, y - high[1])
+        _require(
+            math.hypot(dx, dy) >= obstacle.radius,
+            f"avoidance.obstacles[{k}]",
+            f"the cylinder at {obstacle.center} of radius {obstacle.radius} m reaches into the "
+            f"start box {low}..{high}: UAVs would start inside it",
+        )
+
+
+_HINTS: dict[type, dict[str, typing.Any]] = {}
+
+
+def _check_types(obj: object, prefix: str) -> None:
+    """Every field of a config dataclass tree has its declared kind (a config of the field's
+    class, a bool, an integer, a string, a sequence), so that ``Scenario(...)`` built by hand
+    fails with the field's name instead of an error deep inside."""
+    cls = type(obj)
+    hints = _HINTS.get(cls)
+    if hints is None:
+        hints = _HINTS[cls] = typing.get_type_hints(cls)
+    for f in fields(obj):
+        value, hint, name = getattr(obj, f.name), hints[f.name], prefix + f.name
+        args = typing.get_args(hint)
+        if value is None and type(None) in args:
+            continue
+        kinds = [a for a in args if a is not type(None)] if args and type(None) in args else [hint]
+        kind = kinds[0] if len(kinds) == 1 else None
+        origin = typing.get_origin(kind)
+        if isinstance(kind, type) and is_dataclass(kind):
+            _require(
+                isinstance(value, kind),
+                name,
+                f"must be a {kind.__name__}, got {type(value).__name__} {value!r:.60}",
+            )
+            _check_types(value, name + ".")
+        elif kind is bool:
+            _require(isinstance(value, bool | np.bool_), name, f"must be true/false, got {value!r}")
+        elif kind is int:
+            ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
+            _require(ok, name, f"must be an integer, got {value!r}")
+        elif kind is str:
+            _require(isinstance(value, str), name, f"must be a string, got {value!r}")
+        elif origin is tuple:
+            _require(isinstance(value, tuple | list), name, f"must be a sequence, got {value!r}")
+
+
 def _check_scene(scenario: Scenario) -> None:
     """The draw-time impossibilities of ``scenario.scene`` that its template already shows."""
     scene = scenario.scene
@@ -1002,15 +1113,18 @@ class Scenario:
     scene: SceneConfig | None = None
 
     def __post_init__(self) -> None:
+        _check_types(self, "")
         _positive(self.duration, "duration")
-        capacity = self.initial.capacity()
+        capacity = self.initial.sampler_capacity()
         _require(
             self.n_uav <= capacity,
             "initial.min_spacing",
             f"{self.n_uav} UAVs cannot be {self.initial.min_spacing} m apart in the start box "
-            f"{self.initial.position_low}..{self.initial.position_high} (room for at most "
-            f"{capacity:.0f}); enlarge the box or lower min_spacing",
+            f"{self.initial.position_low}..{self.initial.position_high} (the start sampler "
+            f"places at most {capacity}); enlarge the box or lower min_spacing",
         )
+        _check_observer_tick(self)
+        _check_start_box_clear(self)
         steps = self.duration / self.dynamics.dt
         _require(
             abs(steps - round(steps)) < 1e-6 and round(steps) >= 1,

@@ -38,6 +38,22 @@ _SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 _SAFE_DUMPER = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
+class _UniqueKeyLoader(_SAFE_LOADER):  # type: ignore[misc, valid-type]
+    """The safe loader, refusing a mapping that repeats a key (YAML says keys are unique; PyYAML
+    keeps the last silently)."""
+
+    def construct_mapping(self, node, deep=False):  # noqa: ANN001, ANN201 - PyYAML's signature
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
 def to_dict(obj: Any) -> Any:
     """Plain-data (dict/list/float) form of a config dataclass, fit for YAML or JSON."""
     if dataclasses.is_dataclass(obj):
@@ -229,7 +245,7 @@ def load_scenario(path: str | Path) -> Scenario:
     """
     with open(path, encoding="utf-8") as stream:
         try:
-            data = yaml.load(stream, Loader=_SAFE_LOADER)
+            data = yaml.load(stream, Loader=_UniqueKeyLoader)
         except yaml.YAMLError as error:
             mark = getattr(error, "problem_mark", None)
             where = "" if mark is None else f" at line {mark.line + 1}, column {mark.column + 1}"
@@ -304,9 +320,12 @@ def resolve_with_overrides(
 
     The override ``reward="train"`` puts the scenario under the training preset
     (:data:`~uav_formation_env.config.TRAINING_PRESET`) before the others; ``reward="paper"``
-    (or None) keeps the scenario's own reward, -J_i by default.
+    (or None) keeps the scenario's own reward, -J_i by default. ``max_cycles``, PettingZoo's
+    name, stands for ``episode.max_cycles``.
     """
     overrides = dict(overrides)
+    if "max_cycles" in overrides:
+        overrides["episode.max_cycles"] = overrides.pop("max_cycles")
     reward = overrides.pop("reward", None)
     if reward not in REWARD_CHOICES:
         raise ValueError(f"reward must be one of {REWARD_CHOICES}, got {reward!r}")

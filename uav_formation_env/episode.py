@@ -12,7 +12,8 @@ formula or an episode rule of its own. It owns:
   through the reward transform of ``scenario.episode`` (raw by default);
 - **termination**: ``collision.mode == "terminate"`` and a collision, or the formation centroid
   outside the mission corridor (``episode.corridor_width``): the mission failed;
-- **truncation**: the scenario's duration, or divergence (``episode.max_formation_error``,
+- **truncation**: the scenario's duration, ``episode.max_cycles`` steps after the episode's start,
+  or divergence (``episode.max_formation_error``,
   ``episode.max_velocity_error``), which ends a copy without rewarding or punishing it;
 - **per-copy autoreset** (``autoreset=True``): a copy whose episode ended is reset at once; its
   last observation is kept as ``final_observation``.
@@ -29,6 +30,7 @@ Table of the episode options (``scenario.episode``; units; all off by default):
 | ``corridor_penalty`` | 0 | - | cost added to each agent in the step that leaves the corridor |
 | ``start`` | ``"zero"`` | - | ``"random"``: each episode starts at a step drawn in [0, T); ``"staggered"``: the first reset spreads copy b to step b T / B |
 | ``start_controller`` | ``"heuristic"`` | - | the controller that flies a copy from t = 0 to its start step |
+| ``max_cycles`` | 0 (off) | steps | truncate an episode this many steps after its start |
 
 ``fly_on_after_collision=True`` (the evaluation runner's rule, a constructor option) keeps flying a
 copy after a collision in ``"terminate"`` mode, so that every seed is flown to its end and its
@@ -42,11 +44,13 @@ tensors on that device (docs/architecture.md, "Backends").
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Any
 
 import numpy as np
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.array_api import copy as copy_array
 from uav_formation_env.core.array_api import namespace, to_numpy
 from uav_formation_env.core.cost import anchored
 from uav_formation_env.core.dynamics import velocity_setpoint_input
@@ -330,7 +334,6 @@ class FormationEpisodes:
             compile=compile,
             noise=noise,
         )
-        self.xp = self.sim.xp
         self.batch_size = self.sim.batch_size
         self.n_uav = self.sim.n_uav
         self.u_max = scenario.dynamics.u_max
@@ -345,8 +348,15 @@ class FormationEpisodes:
         self._end_on_collision = collision.mode == "terminate" and not self.fly_on_after_collision
         self._corridor = episode.corridor_width > 0
         self._divergence = episode.max_formation_error > 0 or episode.max_velocity_error > 0
+        self._max_cycles = episode.max_cycles
+        self._episode_start = copy_array(self.sim.steps)  # (B,) sim step of each episode's start
         self._no_copy = self._constant(np.zeros(self.batch_size, dtype=bool))
         self._no_penalty = self._constant(np.zeros((self.batch_size, self.n_uav)))
+
+    @property
+    def xp(self) -> ModuleType:
+        """The simulator's array namespace."""
+        return self.sim.xp
 
     def _constant(self, array: np.ndarray):
         """A constant shared by every step (no allocation per step), on the simulator's device;
@@ -364,6 +374,10 @@ class FormationEpisodes:
         starts = self._start_steps(reset)
         if starts.any():
             result = self._fly_to(starts)
+        if self._max_cycles:
+            self._episode_start = self.xp.where(
+                self.sim._put(reset), self.sim.steps, self._episode_start
+            )
         zero, no = self._no_penalty, self._no_copy  # a reset rewards nothing and ends nothing
         obs, neighbour_index = encode_observations(self.sim, result)
         step = EpisodeStep(
@@ -449,7 +463,10 @@ class FormationEpisodes:
             penalty = penalty + self.scenario.episode.corridor_penalty * left_now
         terminated = left | result.collision.any(axis=1) if self._end_on_collision else left
         diverged = self._diverged(result) & ~terminated if self._divergence else self._no_copy
-        if self._corridor or self._end_on_collision or self._divergence:
+        if self._max_cycles:
+            cycles = (self.sim.steps - self._episode_start) >= self._max_cycles
+            truncated = (result.truncated | cycles | diverged) & ~terminated
+        elif self._corridor or self._end_on_collision or self._divergence:
             truncated = (result.truncated | diverged) & ~terminated
         else:  # only the duration ends episodes
             truncated = result.truncated

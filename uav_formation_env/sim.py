@@ -30,6 +30,7 @@ from __future__ import annotations
 import copy
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, is_dataclass, replace
+from types import ModuleType
 
 import numpy as np
 
@@ -189,7 +190,7 @@ class FormationSim:
             raise ValueError(f"compile=True needs backend='torch' (got backend={backend!r})")
         # the observer's S ticks, the bulk of a step's arithmetic, through torch.compile
         self._observer_held = compiled_observer_step_held if compile else observer_step_held
-        self.xp = namespace_of_backend(backend)
+        namespace_of_backend(backend)  # checks the name (and that torch imports)
         self.backend = backend
         self.device = backend_device(backend, device)
         self.scenario = scenario
@@ -264,6 +265,11 @@ class FormationSim:
         if self.backend == "numpy":
             return values
         return self.xp.asarray(np.ascontiguousarray(values), device=self.device)
+
+    @property
+    def xp(self) -> ModuleType:
+        """The array namespace of :attr:`backend`, looked up (a module does not pickle)."""
+        return namespace_of_backend(self.backend)
 
     def _put_fields(self, data):
         """A dataclass of numpy arrays with every array moved by :meth:`_put` (None: None)."""
@@ -402,6 +408,12 @@ class FormationSim:
             self.observer = self._observer_held(
                 self.observer, self.z[..., 3:], a, u, self.dt, obs_cfg
             )
+            if not bool(xp.isfinite(self.observer.d_hat).all()):
+                raise ValueError(
+                    f"the observer diverged (non-finite estimate at t = {float(self.t.max()):g} "
+                    f"s): its tick dynamics.dt / observer.substeps = {self.dt / obs_cfg.substeps:g}"
+                    " s is too long for its gains; raise observer.substeps"
+                )
         self.z = zoh_step(self.z, a, self.dt)
         self.steps += 1
         # steps x dt: no drift from repeated addition (torch: int x float would be float32)

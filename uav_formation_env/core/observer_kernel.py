@@ -14,6 +14,8 @@ import os
 
 import numpy as np
 
+from uav_formation_env.core.jit import njit_cached
+
 try:  # pragma: no cover - exercised when the [fast] extra is installed
     if os.environ.get("UAV_FORMATION_NO_NUMBA"):
         raise ImportError("disabled by UAV_FORMATION_NO_NUMBA")
@@ -86,4 +88,4 @@ def _step(
         v_hat[m], s0[m], d_hat[m], e_prev[m] = vh, s, dh, ep
 
 
-compiled_step = numba.njit(cache=True)(_step) if AVAILABLE else None
+compiled_step = njit_cached(numba, _step) if AVAILABLE else None

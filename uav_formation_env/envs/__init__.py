@@ -32,7 +32,8 @@ def parallel_env(
             (``observer={"enabled": False}``) or double-underscore paths
             (``observer__enabled=False``), e.g. the training devices of the episode layer
             (``episode__reward="log1p"``, ``episode__corridor_width=200.0``); ``reward="train"``
-            gives the learnable training task (:mod:`uav_formation_env.tasks`).
+            gives the learnable training task (:mod:`uav_formation_env.tasks`); ``max_cycles=K``
+            truncates episodes after K steps (``episode.max_cycles``).
     """
     return UAVFormationParallelEnv(
         resolve_with_overrides(scenario, overrides), render_mode, info_mode

@@ -3,7 +3,8 @@
 PettingZoo's converter stores every agent's action and steps the parallel env when the last agent
 has acted; a bad action stored earlier then fails that step, and every later one, until reset.
 Here an action is checked when its agent submits it: a bad one raises ``ValueError`` naming the
-agent and is not stored, so the same agent can act again and the episode goes on.
+agent and is not stored, so the same agent can act again and the episode goes on. ``step`` before
+``reset`` raises ``RuntimeError``; an action other than None for a done agent, ``ValueError``.
 """
 
 from __future__ import annotations
@@ -23,9 +24,16 @@ class UAVFormationAECEnv(parallel_to_aec_wrapper):
         super().__init__(parallel_env)
 
     def step(self, action: Any) -> None:
+        if not hasattr(self, "agent_selection"):
+            raise RuntimeError("call reset() before step()")
         agent = self.agent_selection
         if not (self.terminations[agent] or self.truncations[agent]):
             validate_action(agent, action)  # raises before anything is stored
+        elif action is not None:
+            raise ValueError(
+                f"{agent} is done (terminated or truncated): its action must be None, "
+                f"got {action!r}"
+            )
         try:
             super().step(action)
         except Exception:

@@ -53,19 +53,27 @@ array, so that TorchRL, BenchMARL and RLlib can stack them): ``J`` (stage cost, 
 whatever the reward transform), ``cost_formation``, ``cost_energy``, ``cost_terminal``,
 ``cost_velocity``, ``cost_separation``, ``cost_obstacle`` (its terms), under the training reward
 ``reward_velocity``, ``reward_formation``, ``reward_route``, ``reward_energy``,
-``reward_separation``, ``reward_clearance`` (its weighted kernels, docs/training.md), ``neighbours`` ((N,) bool mask of the agents it
-receives from this step), ``disturbance`` and ``disturbance_estimate`` (3,) [m/s²],
+``reward_separation``, ``reward_clearance`` (its weighted kernels, docs/training.md), ``neighbours`` (bool mask over
+``possible_agents`` of the agents it receives from this step), ``disturbance`` and ``disturbance_estimate`` (3,) [m/s²],
 ``reference_velocity`` (3,) [m/s], ``group`` (sub-formation id), ``obstacle_distance`` (to the
 nearest obstacle surface [m], inf without obstacles), ``min_separation`` (to the nearest other UAV
 [m]), ``collision``, ``position`` (3,) [m], ``velocity`` (3,) [m/s], ``penalty``, ``t`` [s].
 ``info_mode="rich"`` gives ``cost_terms`` (a dict of the terms) and ``neighbours`` (a list of
 agent names) instead.
 
+**A distribution over N** (``random_swarm``): the agents of an episode are the first N of
+``possible_agents``; a reset also returns, for each possible agent the episode does not have, a
+zero observation and a zero-valued info (PettingZoo allows extra keys; TorchRL's
+``PettingZooWrapper(..., use_mask=True)`` needs every possible agent at reset), and every
+``neighbours`` mask has the length of ``possible_agents``.
+
 **State** (``state()``): positions / 100 m, velocities / 20 m/s, reference velocities / 20 m/s,
 estimates / 0.5 m/s², t / duration, and the adjacency matrix, flattened (float32).
 """  # noqa: E501
 
 from __future__ import annotations
+
+import copy
 
 import numpy as np
 from gymnasium import spaces
@@ -195,7 +203,26 @@ class UAVFormationParallelEnv(ParallelEnv):
         self.agents = list(self._names)
         if self._renderer is not None:
             self._renderer.reset()
-        return self._observations(), self._infos(np.zeros(len(self._names)))
+        obs, infos = self._observations(), self._infos(np.zeros(len(self._names)))
+        if len(self._names) < len(self.possible_agents):
+            self._pad_absent(obs, infos)
+        return obs, infos
+
+    def _pad_absent(self, obs: dict, infos: dict) -> None:
+        """Entries for the possible agents this episode does not have (a distribution over N):
+        a zero observation and an info of the same keys, zero-valued (``neighbours`` all False),
+        so that consumers with one fixed agent set (TorchRL's ``PettingZooWrapper(...,
+        use_mask=True)``) can build their specs from any reset; such agents are not in
+        ``agents`` and never act."""
+        template = infos[self._names[0]]
+        absent = {
+            key: np.zeros_like(value) if isinstance(value, np.ndarray) else type(value)()
+            for key, value in template.items()
+        }
+        zero = np.zeros(self.observation_spaces[self.possible_agents[0]].shape, np.float32)
+        for agent in self.possible_agents[len(self._names) :]:
+            obs[agent] = zero.copy()
+            infos[agent] = {key: copy.copy(value) for key, value in absent.items()}
 
     def _scene_for(self, seed: int | None) -> int | None:
         """For a distribution over N: the seed of this reset (an unseeded reset takes the next
@@ -221,6 +248,10 @@ class UAVFormationParallelEnv(ParallelEnv):
         """Advance one control step δ with every live agent's normalised action."""
         if not self.agents:
             raise RuntimeError("the episode is over (or reset() was never called): call reset()")
+        if len(self._names) < len(self.possible_agents) and isinstance(actions, dict):
+            # the possible agents this episode does not have act on nothing (as TorchRL sends)
+            absent = self.possible_agents[len(self._names) :]
+            actions = {a: v for a, v in actions.items() if a not in absent}
         step = self.episodes.step_validated(validate_actions(actions, self.agents)[None])
         self._result = step.result
         penalty, total = step.penalty[0], step.cost[0]
@@ -282,6 +313,8 @@ class UAVFormationParallelEnv(ParallelEnv):
         # with callgrind); iterating the arrays makes the row views in C, cheaper than indexing
         f, e, m, v, s, ob = (value[0].tolist() for value in cost_terms.values())
         mask = r.adjacency[0] != 0
+        if len(names) < len(self.possible_agents):  # one shape over every N: pad with False
+            mask = np.pad(mask, ((0, 0), (0, len(self.possible_agents) - len(names))))
         return {
             agent: {
                 "J": j,

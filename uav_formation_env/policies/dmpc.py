@@ -32,6 +32,7 @@ from uav_formation_env.core.array_api import as_float, namespace_of, to_numpy
 from uav_formation_env.core.local_observation import (
     DecodedLocalObservation,
     decode_local_observations,
+    observation_bounds,
     observation_size,
 )
 from uav_formation_env.core.observation import (
@@ -143,6 +144,8 @@ class NashDMPCPolicy(PolicyBase):
         self.dt = sc.dynamics.dt
         self.u_max = sc.dynamics.u_max
         self.obs_dim = observation_size(sc)
+        # the observation space: far outside it the costs overflow and every candidate ties
+        self._obs_bounds = tuple(b.astype(np.float64) for b in observation_bounds(sc))
         self.agents = [f"uav_{i}" for i in range(self.n_uav)]
         self._plans: Any = None  # (B, N, H, 3) last broadcast plans [m/s^2], numpy or torch
         self._records: list[StepRecord] = []
@@ -281,6 +284,16 @@ class NashDMPCPolicy(PolicyBase):
             raise ValueError(
                 f"obs contains NaN or infinite values (first: copy {copy}, uav_{agent}); a "
                 "policy cannot act on them"
+            )
+        low, high = (xp.asarray(b, dtype=obs.dtype, device=obs.device) for b in self._obs_bounds)
+        outside = (obs < low) | (obs > high)
+        if bool(xp.any(outside)):
+            copy, agent, slot = np.argwhere(to_numpy(outside))[0]
+            value = float(to_numpy(obs)[copy, agent, slot])
+            raise ValueError(
+                f"obs outside the observation space (first: copy {copy}, uav_{agent}, slot "
+                f"{slot} = {value:g}, bounds [{self._obs_bounds[0][slot]:g}, "
+                f"{self._obs_bounds[1][slot]:g}]); a policy cannot act on them"
             )
         if not self.local:
             return decode_observations(obs, self.n_uav)

@@ -154,7 +154,7 @@ def make_policy(
         return _SIMPLE[key](scenario, seed)
     path = MODELS_DIR / key if key in SHIPPED_MODELS else Path(name)
     if is_policy_dir(path):
-        exported = FilePolicy(path)
+        exported = _loaded(path, lambda: FilePolicy(path))
         exported.check_scenario(scenario)
         return _in_its_action_mode(exported, scenario)
     if path.suffix == ".pt" or (path.is_dir() and (path / "policy.pt").is_file()):
@@ -164,7 +164,7 @@ def make_policy(
         )
     path = run_model_file(path)
     if path.is_file() or path.with_suffix(".zip").is_file():
-        policy = SB3Policy(path, algo, trust_pickle=trust_pickle)
+        policy = _loaded(path, lambda: SB3Policy(path, algo, trust_pickle=trust_pickle))
         policy.check_scenario(scenario)
         return policy
     if path.is_dir():
@@ -177,3 +177,19 @@ def make_policy(
         f"unknown policy {name!r}: expected one of {[*POLICY_NAMES, *SHIPPED_MODELS]}, a policy "
         "directory (policy.json + policy.npz) or a stable-baselines3 model (.zip)"
     )
+
+
+def _loaded(path: Path, load: Callable[[], BatchPolicy]) -> BatchPolicy:
+    """``load()``, with a corrupt or foreign file's error (torch's, pickle's, zipfile's) as one
+    ``ValueError`` naming the file; the loaders' own errors (ValueError, a missing file or
+    extra) pass unchanged."""
+    try:
+        return load()
+    except (FileNotFoundError, ImportError, ValueError):
+        raise
+    except Exception as error:  # noqa: BLE001 - any failure of a third-party loader
+        first = str(error).strip().splitlines()[0] if str(error).strip() else ""
+        raise ValueError(
+            f"cannot load the model {str(path)!r} (corrupt, truncated or not a model file?): "
+            f"{type(error).__name__}: {first[:200]}"
+        ) from error

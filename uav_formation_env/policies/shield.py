@@ -25,13 +25,17 @@ barrier is one half-space ``g · u_n >= β`` per UAV:
 
 **Projection**: where the policy's action meets every barrier it is passed on unchanged;
 elsewhere the shield solves ``min ||x - x_policy||²`` subject to the barriers and the box
-``|u_n| <= u_max - |estimate|`` (:func:`~uav_formation_env.policies.broadcast.input_half_width`)
-by accelerated projected gradient ascent on the dual, batched over the UAVs that need it (where
-the barriers cannot all be met inside the box: the box-limited compromise).
+``|u_n| <= u_max - |estimate|`` (the input range the plant leaves while the observer
+compensates, :func:`~uav_formation_env.policies.broadcast.input_half_width`) exactly, by the
+active sets of at most three constraints (tested against scipy's SLSQP), batched over every UAV
+that needs it. Where the barriers cannot all be met inside the box the answer is the box-limited
+compromise of projected gradient ascent on the dual (accelerated).
 """
 
 from __future__ import annotations
 
+import functools
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -72,7 +76,7 @@ class ShieldConfig:
         obstacle_margin: clearance kept from every obstacle's surface [m].
         separation_margin: distance kept beyond ``collision.uav_distance`` between UAVs [m].
         gain: α of the barriers' class-K terms [1/s]; smaller starts avoiding earlier.
-        iterations: dual ascent iterations of a projection.
+        iterations: dual ascent iterations of a projection whose barriers cannot all be met.
     """
 
     # chosen on validation scenes of random_fields (never the held-out seeds); the sweep of
@@ -177,24 +181,88 @@ def project_onto_halfspaces(
 ) -> np.ndarray:
     """``argmin ||x - x0||²`` subject to ``normal_k · x >= bound_k`` and ``|x| <= half_width``.
 
-    Projected gradient ascent on the dual with Nesterov's acceleration: for multipliers λ >= 0
-    the minimiser over the box is ``clip(x0 + Σ λ_k normal_k)`` and the dual's gradient is
-    ``bound - normal · x``, Lipschitz with ``||G||_2² <= ||G||_F²``, so the step is
-    ``1 / ||G||_F²`` (at least 1 / K for K unit normals). Every row is one problem; rows run
-    together (no loop over UAVs).
+    Exact (to rounding) where the constraints can all be met: in three dimensions the
+    projection onto a non-empty polyhedron is the projection of ``x0`` onto the affine hull of
+    at most three of its constraints taken as equalities, so every such set is tried
+    (:func:`_exact_projection`, batched over rows and sets) and the nearest feasible point is
+    the answer. Where they cannot all be met inside the box, the answer is the box-limited
+    compromise of ``iterations`` steps of accelerated projected ascent on the dual
+    (:func:`_dual_ascent`).
 
     Args:
         x0: (M, 3) the points to project.
         normal: (M, K, 3) unit (or zero) normals.
         bound: (M, K) bounds.
         half_width: (M, 3) the box, >= 0.
-        iterations: ascent steps.
+        iterations: dual ascent steps of the infeasible rows.
 
     Returns:
-        (M, 3) the projection (the box-limited compromise where the half-spaces and the box do
-        not meet).
+        (M, 3) the projection.
     """
-    # 1 / ||G||_F^2 per problem: a Lipschitz bound of the dual gradient (one row: exact in a step)
+    x, feasible = _exact_projection(x0, normal, bound, half_width)
+    if not feasible.all():
+        rest = ~feasible
+        x[rest] = _dual_ascent(x0[rest], normal[rest], bound[rest], half_width[rest], iterations)
+    return x
+
+
+@functools.lru_cache(maxsize=64)
+def _active_sets(count: int) -> tuple[np.ndarray, ...]:
+    """Index arrays (C_s, s) of every set of s = 1, 2, 3 of ``count`` constraints."""
+    return tuple(
+        np.array(list(itertools.combinations(range(count), size)), dtype=np.intp).reshape(-1, size)
+        for size in (1, 2, 3)
+    )
+
+
+def _exact_projection(
+    x0: np.ndarray, normal: np.ndarray, bound: np.ndarray, half_width: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The exact projection of each row and whether its constraints can be met at all (rows
+    that cannot keep ``x0``). Shapes as :func:`project_onto_halfspaces`."""
+    m = len(x0)
+    eye = np.eye(3)
+    # the box as six more half-spaces: x_c >= -w_c and -x_c >= -w_c
+    box_normal = np.broadcast_to(np.concatenate([eye, -eye]), (m, 6, 3))
+    a = np.concatenate([normal, box_normal], axis=1)  # (M, K + 6, 3)
+    b = np.concatenate([bound, -half_width, -half_width], axis=1)  # (M, K + 6)
+    scale = 1.0 + np.abs(b).max(axis=1, initial=0.0, where=b > _NEVER / 2)
+    candidates, distances = [x0[:, None, :]], [np.zeros((m, 1))]
+    for sets in _active_sets(a.shape[1]):
+        rows, rhs = a[:, sets], b[:, sets]  # (M, C, s, 3), (M, C, s)
+        gram = np.einsum("mcid,mcjd->mcij", rows, rows)
+        det = np.linalg.det(gram)
+        regular = np.abs(det) > 1e-10
+        gram = np.where(regular[..., None, None], gram, np.eye(gram.shape[-1]))
+        residual = np.einsum("mcid,md->mci", rows, x0) - rhs
+        y = np.linalg.solve(gram, residual[..., None])[..., 0]
+        x = x0[:, None, :] - np.einsum("mcid,mci->mcd", rows, y)
+        x = np.where(regular[..., None], x, np.nan)
+        candidates.append(x)
+        distances.append(np.einsum("mcd,mcd->mc", x - x0[:, None], x - x0[:, None]))
+    x = np.concatenate(candidates, axis=1)  # (M, C, 3)
+    distance = np.concatenate(distances, axis=1)
+    slack = np.einsum("mkd,mcd->mck", a, x) - b[:, None, :]
+    feasible = (slack >= -1e-9 * scale[:, None, None]).all(axis=-1) & np.isfinite(distance)
+    distance = np.where(feasible, distance, np.inf)
+    best = np.argmin(distance, axis=1)
+    found = feasible[np.arange(m), best]
+    projected = x[np.arange(m), best]
+    return np.where(found[:, None], projected, x0).copy(), found
+
+
+def _dual_ascent(
+    x0: np.ndarray,
+    normal: np.ndarray,
+    bound: np.ndarray,
+    half_width: np.ndarray,
+    iterations: int,
+) -> np.ndarray:
+    """Projected gradient ascent on the dual with Nesterov's acceleration: for multipliers
+    λ >= 0 the minimiser over the box is ``clip(x0 + Σ λ_k normal_k)`` and the dual's gradient
+    is ``bound - normal · x``, Lipschitz with ``||G||_2² <= ||G||_F²``, so the step is
+    ``1 / ||G||_F²``. Where the constraints cannot all be met the multipliers grow and ``x``
+    settles at the box-limited compromise. Shapes as :func:`project_onto_halfspaces`."""
     step = 1.0 / np.maximum(np.einsum("mkc,mkc->m", normal, normal), 1e-12)[:, None]
     multiplier = np.zeros(bound.shape)
     ahead = multiplier

@@ -11,6 +11,7 @@ import os
 
 import numpy as np
 
+from uav_formation_env.core.jit import njit_cached
 from uav_formation_env.policies.optimizers.config import FITNESS_EPS, LFPIOConfig
 from uav_formation_env.policies.optimizers.levy import (
     TINY,
@@ -194,9 +195,9 @@ def lfpio_select(
 
 
 if COMPILED_AVAILABLE:  # pragma: no branch
-    _pairwise_sum = numba.njit(cache=True)(_pairwise_sum)
-    _lfpio_move_compiled = numba.njit(cache=True)(lfpio_move)
-    _lfpio_select_compiled = numba.njit(cache=True)(lfpio_select)
+    _pairwise_sum = njit_cached(numba, _pairwise_sum)
+    _lfpio_move_compiled = njit_cached(numba, lfpio_move)
+    _lfpio_select_compiled = njit_cached(numba, lfpio_select)
 
 
 def lfpio_search_compiled(run: Population, rng: np.random.Generator, cfg: LFPIOConfig) -> None:
