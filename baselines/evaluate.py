@@ -43,6 +43,7 @@ from uav_formation_env.evaluation import (
 )
 from uav_formation_env.policies.policy_file import is_policy_dir
 from uav_formation_env.policies.registry import POLICY_NAMES, SIMPLE_POLICIES
+from uav_formation_env.tasks import evaluation_scenario
 
 REFERENCE = "lfpio"  # the policy whose realised cost the ratio column divides by
 OUTPUT_FILES = (
@@ -69,8 +70,13 @@ def model_path(run: str | Path, best: bool = False) -> Path:
 
 
 def run_scenario(run: str | Path) -> Scenario:
-    """The scenario a run was trained for: its ``scenario.yaml``, else its config's scenario
-    name, else the paper's."""
+    """The scenario a run's policy is evaluated on: the one it was trained for (its
+    ``scenario.yaml``, else its config's scenario name, else the paper's) under the evaluation's
+    rules (:func:`uav_formation_env.tasks.evaluation_scenario`)."""
+    return evaluation_scenario(_trained_for(run))
+
+
+def _trained_for(run: str | Path) -> Scenario:
     run = Path(run)
     directory = run.parent if run.is_file() else run
     # a run's best/ and checkpoints/<steps>/ sit one and two levels below its directory

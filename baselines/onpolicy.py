@@ -34,12 +34,16 @@ from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.onpolicy_config import ONPOLICY_ALGOS, load_config
 from uav_formation_baselines.onpolicy_trainer import OnPolicyTrainer, build_scenario
 from uav_formation_env.cli import OneLineParser, integer_at_least
+from uav_formation_env.evaluation.heldout import HELDOUT_SEEDS, report_run
+
+PROG = "python -m uav_formation_baselines.onpolicy"
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     parser = OneLineParser(
-        prog="python -m uav_formation_baselines.onpolicy",
-        description="Train PPO (shared), MAPPO or IPPO on the batched episode layer in-process.",
+        prog=prog,
+        description="Train PPO (shared), MAPPO or IPPO on the batched episode layer in-process, "
+        "on the training task (docs/training.md, which gives the measured durations).",
     )
     parser.add_argument("--algo", choices=ONPOLICY_ALGOS, required=True)
     parser.add_argument(
@@ -77,6 +81,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="hyper-parameter override (YAML value); env.<scenario key>=... overrides the task",
     )  # fmt: skip
     parser.add_argument("--hyperparams", default=None, help="YAML file (default: shipped)")
+    parser.add_argument(
+        "--heldout-seeds",
+        type=integer_at_least(0),
+        default=len(HELDOUT_SEEDS),
+        help="held-out seeds (0, 1, ...) flown at the end by the policy and LFPIO (0: none)",
+    )
     parser.add_argument("--no-progress", action="store_true")
     return parser
 
@@ -95,9 +105,9 @@ def _interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     """Command-line entry point; returns the exit code."""
-    args = build_parser().parse_args(argv)
+    args = build_parser(prog or PROG).parse_args(argv)
     overrides = parse_set(args.overrides)
     for key, value in (
         ("copies", args.copies),
@@ -140,6 +150,8 @@ def main(argv: list[str] | None = None) -> int:
         f"eval {result.get('eval_completed', '-')}/{result.get('eval_episodes', '-')} completed, "
         f"J {result.get('eval_J', float('nan')):.4g}; wrote {args.out}"
     )
+    reward = float(result.get("eval_return", float("nan")))
+    report_run(args.out, args.heldout_seeds, training_reward=reward)
     return 0
 
 

@@ -109,6 +109,8 @@ def _model_scenario(policy: str) -> str | Path:
 
 
 def _scenario_for(args: argparse.Namespace):
+    from uav_formation_env.tasks import evaluation_scenario
+
     policy = getattr(args, "policy", None)
     model = _model_scenario(policy) if policy else "paper"  # "" would name the current directory
     # evaluate / render without --scenario: a model's own scenario, else the paper's
@@ -118,6 +120,8 @@ def _scenario_for(args: argparse.Namespace):
         # scene it flies (as uav_formation_baselines.results does): a local-layout student of
         # random_swarm flies random_fields, whose own layout is the full one
         scenario = replace(scenario, observation=resolve_scenario(model).observation)
+    if isinstance(model, Path):  # a run's own scenario flies under the evaluation's rules
+        scenario = evaluation_scenario(scenario)
     overrides = {}
     if getattr(args, "observer", None) is not None:
         overrides["observer.enabled"] = args.observer == "on"
@@ -623,9 +627,20 @@ def _train_rllib(argv: list[str]) -> int:
     return int(rllib_main(argv))
 
 
-# --algo -> the trainer given every argument after "train". The in-process on-policy trainer
-# (uav_formation_baselines.onpolicy: ppo-fast, mappo) is added here as it lands.
+def _train_onpolicy(argv: list[str]) -> int:
+    """``--algo ppo-fast|mappo|ippo``: the in-process trainer on the training task
+    (``uav_formation_baselines.onpolicy``; ``ppo-fast`` is its parameter-sharing PPO)."""
+    from uav_formation_baselines.onpolicy import main as onpolicy_main
+
+    argv = ["ppo" if item == "ppo-fast" else item.replace("=ppo-fast", "=ppo") for item in argv]
+    return int(onpolicy_main(argv, prog="uav-formation train"))
+
+
+# --algo -> the trainer given every argument after "train"
 TRAINERS: dict[str, Callable[[list[str]], int]] = {
+    "ppo-fast": _train_onpolicy,
+    "mappo": _train_onpolicy,
+    "ippo": _train_onpolicy,
     "ppo": _train_sb3,
     "sac": _train_sb3,
     "rllib-ppo": _train_rllib,

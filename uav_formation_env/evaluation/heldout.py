@@ -23,6 +23,7 @@ from uav_formation_env.config_io import load_scenario, with_overrides
 from uav_formation_env.evaluation.metrics import summarise_groups
 from uav_formation_env.evaluation.runner import run_episode_groups
 from uav_formation_env.policies.registry import BatchPolicy, make_policy
+from uav_formation_env.tasks import evaluation_scenario
 
 __all__ = ["HELDOUT_FILE", "HELDOUT_SEEDS", "HeldoutReport", "heldout_report", "report_run"]
 
@@ -180,7 +181,8 @@ def report_run(
     if seeds == 0:
         return None
     out = Path(out)
-    scenario = load_scenario(out / "scenario.yaml")
+    # the run's own scenario under the evaluation's rules (acceleration actions, no corridor)
+    scenario = evaluation_scenario(load_scenario(out / "scenario.yaml"))
     report = heldout_report(
         scenario,
         make_policy(str(out), scenario),
