@@ -289,6 +289,7 @@ def recorded_calls(scenario, batch, seed, steps, monkeypatch, n_uav=None):
 
         monkeypatch.setattr(episode_module, name, capture)
     sim = FormationSim(scenario, batch, n_uav=n_uav)
+    sim.fast_path = None  # the builders under test, not the compiled step's observation
     result = sim.reset(seed=seed)
     rng = np.random.default_rng(seed)
     episode_module.encode_observations(sim, result)
