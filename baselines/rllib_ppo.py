@@ -4,17 +4,17 @@
     uav-formation train --algo rllib-ppo --address auto ...      # an existing cluster
     uav-formation evaluate --policy runs/rllib --seeds 5
 
-RLlib's ``ParallelPettingZooEnv`` wraps ``parallel_env(scenario, <training devices>)`` unpatched;
+RLlib's ``ParallelPettingZooEnv`` wraps ``parallel_env(scenario, reward="train")`` unpatched:
+the training task of :mod:`uav_formation_env.tasks` (docs/training.md), nothing RLlib-specific;
 every agent maps to the one RLModule ``"shared"``. ``--num-env-runners K`` samples on K remote
-env runners (Ray actors, one CPU each); 0 samples in the driver. The training devices are the
-episode layer's options (:data:`TRAINING_DEVICES`: log-compressed reward, divergence truncation,
-mission corridor), nothing RLlib-specific.
+env runners (Ray actors, one CPU each); 0 samples in the driver.
 
 A run directory holds ``checkpoint/`` (RLlib's, to resume: ``--resume``), the shared actor as a
 policy file (``policy.json`` + ``policy.npz``, :mod:`uav_formation_env.policies.policy_file`:
 the Gaussian's mean, clipped to [-1, 1], is the deterministic action), ``scenario.yaml`` (the
-scenario as evaluated, without the training devices), ``progress.csv`` and ``config.yaml``. The
-policy needs only numpy: ``uav-formation evaluate --policy PATH`` runs it without Ray or torch.
+scenario trained on: evaluation flies it under the evaluation's rules), ``progress.csv`` and
+``config.yaml``. The policy needs only numpy: ``uav-formation evaluate --policy PATH`` runs it
+without Ray or torch.
 
 RLlib is the ``[rllib]`` extra in a virtual environment of its own (``ray[rllib]`` 2.60 pins
 gymnasium 1.2.2); ``tests/rllib/run.sh`` builds one.
@@ -35,7 +35,6 @@ import yaml
 
 from uav_formation_env.cli import OneLineParser, integer_at_least, positive_number
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
-from uav_formation_env.episode import TRAINING_DEVICES
 
 ENV_NAME = "uav_formation"
 MODULE_ID = "shared"
@@ -60,7 +59,7 @@ def build_config(args: argparse.Namespace):
     from ray.tune.registry import register_env
 
     register_env(ENV_NAME, make_env)
-    env_config: dict[str, Any] = {"scenario": args.scenario, **TRAINING_DEVICES}
+    env_config: dict[str, Any] = {"scenario": args.scenario, "reward": "train"}
     if args.duration is not None:
         env_config["duration"] = args.duration
     hidden = [args.hidden, args.hidden]
@@ -128,8 +127,9 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
     """Train, checkpoint and export (see the module docstring); returns a summary."""
     import numpy as np
 
-    from uav_formation_env.core.observation import observation_dim
+    from uav_formation_env.core.local_observation import observation_size
     from uav_formation_env.distributed import ray_session
+    from uav_formation_env.tasks import training_scenario
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
@@ -169,13 +169,13 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
             if checkpoint.exists():
                 shutil.rmtree(checkpoint)
             algo.save(str(checkpoint.resolve()))
-            export_policy(algo, out, observation_dim(scenario.n_uav))
+            export_policy(algo, out, observation_size(training_scenario(scenario)))
         finally:
             logdir = getattr(algo, "logdir", None)
             algo.stop()
             if logdir and os.path.isdir(logdir) and not os.listdir(logdir):
                 os.rmdir(logdir)  # the empty folder of a run without loggers
-    save_scenario(scenario, out / "scenario.yaml")
+    save_scenario(training_scenario(scenario), out / "scenario.yaml")
     with open(out / "progress.csv", "w", newline="", encoding="utf-8") as stream:
         writer = csv.DictWriter(stream, fieldnames=list(rows[0]) if rows else ["iteration"])
         writer.writeheader()
@@ -185,7 +185,7 @@ def train(args: argparse.Namespace) -> dict[str, Any]:
         "scenario": scenario.name,
         "iterations": args.iterations,
         "num_env_runners": args.num_env_runners,
-        "training_devices": TRAINING_DEVICES,
+        "reward": "train",
         "returns": [row["episode_return_mean"] for row in rows],
         "parameters_changed": bool(changed),
         "seconds": rows[-1]["seconds"] if rows else 0.0,

@@ -36,8 +36,9 @@ from torch.distributions import Normal
 from uav_formation_baselines.torch_policy import save_policy
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
-from uav_formation_env.episode import TRAINING_DEVICES, FormationEpisodes
+from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.evaluation.heldout import report_run
+from uav_formation_env.tasks import training_scenario
 
 
 def layer_init(layer: nn.Linear, std: float = np.sqrt(2), bias: float = 0.0) -> nn.Linear:
@@ -99,7 +100,7 @@ def evaluated_scenario(args: argparse.Namespace) -> Scenario:
 
 
 def make_episodes(args: argparse.Namespace) -> FormationEpisodes:
-    scenario = with_overrides(evaluated_scenario(args), TRAINING_DEVICES)
+    scenario = training_scenario(evaluated_scenario(args))
     return FormationEpisodes(scenario, batch_size=args.copies, autoreset=True)
 
 
@@ -196,7 +197,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     seconds = time.perf_counter() - start
     print(f"{args.updates} update(s) in {seconds:.1f} s; parameters changed: {changed}")
     out = Path(args.out)
-    save_run(agent, evaluated_scenario(args), out, b_obs[:64])
+    save_run(agent, training_scenario(evaluated_scenario(args)), out, b_obs[:64])
     recent = float(np.mean(finished[-100:])) if finished else None
     report = report_run(out, args.heldout_seeds, training_reward=recent, progress=not args.quiet)
     return {

@@ -34,8 +34,8 @@ from stable_baselines3.common.vec_env import VecMonitor
 from uav_formation_env import vec_env
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
-from uav_formation_env.episode import TRAINING_DEVICES
 from uav_formation_env.evaluation.heldout import report_run
+from uav_formation_env.tasks import training_scenario
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
@@ -43,7 +43,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     scenario = resolve_scenario(args.scenario)  # as evaluated: without the training devices
     if args.duration is not None:
         scenario = with_overrides(scenario, {"duration": args.duration})
-    env = VecMonitor(vec_env(scenario, num_copies=args.copies, **TRAINING_DEVICES))
+    env = VecMonitor(vec_env(scenario, num_copies=args.copies, reward="train"))
     model = PPO(
         "MlpPolicy",
         env,
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     )
     env.close()
     out = Path(args.out)
-    save_run(model, scenario, out)
+    save_run(model, training_scenario(scenario), out)
     report = report_run(out, args.heldout_seeds, training_reward=mean, progress=not args.quiet)
     return {
         "returns": returns,

@@ -45,8 +45,8 @@ from uav_formation_baselines.torch_policy import save_policy
 from uav_formation_env import parallel_env
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
-from uav_formation_env.episode import TRAINING_DEVICES
 from uav_formation_env.evaluation.heldout import report_run
+from uav_formation_env.tasks import training_scenario
 
 GROUP = "uav"  # the group TorchRL infers from the agent names uav_0..uav_4
 
@@ -59,7 +59,7 @@ def evaluated_scenario(scenario: str = "paper", duration: float | None = None) -
 
 def make_env(scenario: str = "paper", duration: float | None = None, seed: int = 0):
     """The wrapped env with an episode-return counter, ``("uav", "episode_reward")``."""
-    env = parallel_env(evaluated_scenario(scenario, duration), **TRAINING_DEVICES)
+    env = parallel_env(evaluated_scenario(scenario, duration), reward="train")
     base = PettingZooWrapper(env=env, seed=seed)
     return TransformedEnv(
         base, RewardSum(in_keys=[base.reward_key], out_keys=[(GROUP, "episode_reward")])
@@ -215,7 +215,8 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     print(f"{args.iterations} iteration(s) in {seconds:.1f} s; actor parameters changed: {changed}")
     out = Path(args.out)
     sample = data[GROUP, "observation"].reshape(-1, data[GROUP, "observation"].shape[-1])[:64]
-    save_run(actor.module[0].module, evaluated_scenario(args.scenario, args.duration), out, sample)
+    trained = training_scenario(evaluated_scenario(args.scenario, args.duration))
+    save_run(actor.module[0].module, trained, out, sample)
     recent = float(sum(returns[-100:]) / len(returns[-100:])) if returns else None
     report = report_run(out, args.heldout_seeds, training_reward=recent, progress=not args.quiet)
     return {

@@ -23,7 +23,7 @@ from uav_formation_env.cli import main as cli  # noqa: E402
 
 
 def test_parallel_pettingzoo_env_wraps_the_env_unpatched() -> None:
-    env = rllib_ppo.make_env({"scenario": "paper", **rllib_ppo.TRAINING_DEVICES})
+    env = rllib_ppo.make_env({"scenario": "paper", "reward": "train"})
     obs, infos = env.reset(seed=0)
     assert sorted(obs) == [f"uav_{i}" for i in range(5)]
     assert obs["uav_0"].shape == (47,)

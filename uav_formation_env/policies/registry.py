@@ -105,20 +105,33 @@ def run_model_file(path: Path) -> Path:
     return path
 
 
-def _in_its_action_mode(policy: FilePolicy, scenario: Scenario) -> BatchPolicy:
-    """A policy file as an acceleration policy: one trained in the velocity action mode (its
-    ``action_mode``) flies through :class:`~uav_formation_env.policies.action_modes.
-    VelocitySetpointPolicy` with the set-point range and gain it was trained with."""
-    header = policy.header
-    if header.get("action_mode", "acceleration") != "velocity":
-        return policy
+def _in_its_action_mode(
+    policy: BatchPolicy, scenario: Scenario, directory: Path, header: dict | None = None
+) -> BatchPolicy:
+    """A saved policy as an acceleration policy: one trained in the velocity action mode flies
+    through :class:`~uav_formation_env.policies.action_modes.VelocitySetpointPolicy` with the
+    set-point range and gain it was trained with. The mode is the policy file's
+    ``action_mode`` (``header``), else that of the ``scenario.yaml`` in ``directory`` (every
+    trainer writes one), else acceleration."""
     from uav_formation_env.config import EpisodeConfig
+
+    header, beside = header or {}, directory / "scenario.yaml"
+    if "action_mode" in header:
+        episode = EpisodeConfig(
+            action=header["action_mode"],
+            velocity_range=float(header.get("velocity_range", EpisodeConfig.velocity_range)),
+            velocity_gain=float(header.get("velocity_gain", EpisodeConfig.velocity_gain)),
+        )
+    elif beside.is_file():
+        from uav_formation_env.config_io import load_scenario
+
+        episode = load_scenario(beside).episode
+    else:
+        return policy
+    if episode.action != "velocity":
+        return policy
     from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
 
-    episode = EpisodeConfig(
-        velocity_range=float(header.get("velocity_range", EpisodeConfig.velocity_range)),
-        velocity_gain=float(header.get("velocity_gain", EpisodeConfig.velocity_gain)),
-    )
     return VelocitySetpointPolicy(policy, episode, scenario.dynamics.u_max)
 
 
@@ -156,7 +169,7 @@ def make_policy(
     if is_policy_dir(path):
         exported = _loaded(path, lambda: FilePolicy(path))
         exported.check_scenario(scenario)
-        return _in_its_action_mode(exported, scenario)
+        return _in_its_action_mode(exported, scenario, exported.path, exported.header)
     if path.suffix == ".pt" or (path.is_dir() and (path / "policy.pt").is_file()):
         raise ValueError(
             f"policy {name!r}: TorchScript files (.pt) are not read (loading them runs code); "
@@ -166,7 +179,7 @@ def make_policy(
     if path.is_file() or path.with_suffix(".zip").is_file():
         policy = _loaded(path, lambda: SB3Policy(path, algo, trust_pickle=trust_pickle))
         policy.check_scenario(scenario)
-        return policy
+        return _in_its_action_mode(policy, scenario, path.parent)
     if path.is_dir():
         raise FileNotFoundError(
             f"policy directory {name!r} holds no model: expected one of {list(RUN_MODEL_FILES)}"
