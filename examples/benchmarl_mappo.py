@@ -1,7 +1,7 @@
 """BenchMARL MAPPO on the paper's scenario, through the shipped task class.
 
 ``uav_formation_baselines.benchmarl_task.UavFormationTask.PAPER`` is a BenchMARL task (one group
-``"uav"``, continuous actions, the global state for the centralised critic, the training devices
+``"uav"``, continuous actions, the global state for the centralised critic, the training preset
 on by default); any other registered scenario is another member (``.N3``, ``.WINDY``, ...) and a
 YAML scenario goes through ``uav_formation_task("file.yaml")``.
 

@@ -16,8 +16,8 @@ contract: :mod:`uav_formation_baselines.torch_policy`) and ``scenario.yaml``; th
 the mission on held-out seeds beside LFPIO's (:func:`uav_formation_env.evaluation.heldout.
 report_run`).
 
-The training devices of the episode layer (see docs/integrations.md) keep the rewards at a few
-units per step; the raw returns are -2e11..-4e12 per episode. All copies start together, so a
+The training task (``reward="train"``, docs/training.md) keeps the reward in (0, 1] per UAV
+and step; the paper's raw -J_i returns are -2e11..-4e12 per episode. All copies start together, so a
 rollout of T steps sees the same phase of the mission in every copy.
 """
 
@@ -92,7 +92,7 @@ class ExportedActor(nn.Module):
 
 
 def evaluated_scenario(args: argparse.Namespace) -> Scenario:
-    """The scenario as evaluated: ``--scenario`` with ``--duration``, no training devices."""
+    """The task: ``--scenario`` with ``--duration`` (the training preset goes on top)."""
     scenario = resolve_scenario(args.scenario)
     if args.duration is not None:
         scenario = with_overrides(scenario, {"duration": args.duration})

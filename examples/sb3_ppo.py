@@ -1,6 +1,6 @@
 """stable-baselines3 PPO with one policy shared by all UAVs, on the batched VecEnv.
 
-``uav_formation_env.vec_env("paper", num_copies=B, <training devices>)`` is an SB3 ``VecEnv``
+``uav_formation_env.vec_env("paper", num_copies=B, reward="train")`` is an SB3 ``VecEnv``
 with one entry per (copy, agent): B x 5 entries, every UAV of every copy a separate environment of
 the one shared policy (parameter sharing). ``VecMonitor`` records each entry's episode return
 (one UAV's).
@@ -14,7 +14,7 @@ The run directory holds ``model.zip`` and ``scenario.yaml`` (the scenario as eva
 ends with the mission on held-out seeds beside LFPIO's
 (:func:`uav_formation_env.evaluation.heldout.report_run`).
 
-The training devices of the episode layer (see docs/integrations.md) keep the rewards at a few
+The training task (``reward="train"``, docs/training.md) keeps the rewards at a few
 units per step (the raw returns are -2e11..-4e12 per episode). For the full recipe used for the
 shipped baselines (VecNormalize, staggered starts), see ``python -m uav_formation_baselines.train``.
 """
@@ -40,7 +40,7 @@ from uav_formation_env.tasks import training_scenario
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     args = parse_args(argv)
-    scenario = resolve_scenario(args.scenario)  # as evaluated: without the training devices
+    scenario = resolve_scenario(args.scenario)  # the task (the training preset goes on top)
     if args.duration is not None:
         scenario = with_overrides(scenario, {"duration": args.duration})
     env = VecMonitor(vec_env(scenario, num_copies=args.copies, reward="train"))

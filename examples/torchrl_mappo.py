@@ -1,6 +1,6 @@
 """TorchRL MAPPO on the paper's scenario, in the style of TorchRL's multi-agent PPO tutorial.
 
-TorchRL's ``PettingZooWrapper`` takes ``parallel_env("paper", <training devices>)`` unpatched and
+TorchRL's ``PettingZooWrapper`` takes ``parallel_env("paper", reward="train")`` unpatched and
 groups the five UAVs as ``"uav"`` (observations ``("uav", "observation")`` of shape (5, 47),
 actions ``("uav", "action")`` (5, 3) in [-1, 1]). The actor is one MLP shared by the agents
 (decentralised: each UAV's own observation), the critic one shared MLP over all agents'
@@ -17,8 +17,8 @@ location, the deterministic action, and log-scale; :mod:`uav_formation_baselines
 and ``scenario.yaml``; the run ends with the mission on held-out seeds beside LFPIO's
 (:func:`uav_formation_env.evaluation.heldout.report_run`).
 
-The training devices of the episode layer (see docs/integrations.md) keep the rewards at a few
-units per step; the raw returns are -2e11..-4e12 per episode.
+The training task (``reward="train"``, docs/training.md) keeps the reward in (0, 1] per UAV
+and step; the paper's raw -J_i returns are -2e11..-4e12 per episode.
 """
 
 from __future__ import annotations
@@ -52,7 +52,7 @@ GROUP = "uav"  # the group TorchRL infers from the agent names uav_0..uav_4
 
 
 def evaluated_scenario(scenario: str = "paper", duration: float | None = None) -> Scenario:
-    """The scenario as evaluated: with ``duration``, without the training devices."""
+    """The task: ``scenario`` with ``duration`` (the training preset goes on top)."""
     resolved = resolve_scenario(scenario)
     return resolved if duration is None else with_overrides(resolved, {"duration": duration})
 

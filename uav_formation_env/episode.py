@@ -77,7 +77,6 @@ from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.sim import FormationSim, SeedLike, StepResult
 
 __all__ = [
-    "TRAINING_DEVICES",
     "EpisodeStep",
     "FormationEpisodes",
     "StepResult",
@@ -89,18 +88,6 @@ __all__ = [
     "validate_action",
     "validate_actions",
 ]
-
-
-# The training devices the examples and trainer recipes set (as env overrides): returns of a few
-# units per step instead of -2e11..-4e12 per episode, no samples from diverged copies, and an
-# episode that ends where the formation leaves the route.
-TRAINING_DEVICES: dict[str, Any] = {
-    "episode__reward": "log1p",
-    "episode__reward_scale": 100.0,
-    "episode__max_formation_error": 100.0,
-    "episode__max_velocity_error": 40.0,
-    "episode__corridor_width": 200.0,
-}
 
 
 def validate_action(agent: str, action: Any) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 ``ray[rllib]`` pins a gymnasium older than the main environment's, so this folder is not collected
 by the main ``python -m pytest`` run. One PPO iteration of the recipe
-(:mod:`uav_formation_baselines.rllib_ppo`) on the paper's scenario with the training devices:
+(:mod:`uav_formation_baselines.rllib_ppo`) on the paper's scenario under the training preset:
 finite returns of a sane size, the shared module's parameters changed, a checkpoint that resumes
 and an exported policy that ``uav-formation evaluate`` runs.
 """
