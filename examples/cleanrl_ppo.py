@@ -17,8 +17,8 @@ the mission on held-out seeds beside LFPIO's (:func:`uav_formation_env.evaluatio
 report_run`).
 
 The training task (``reward="train"``, docs/training.md) keeps the reward in (0, 1] per UAV
-and step; the paper's raw -J_i returns are -2e11..-4e12 per episode. All copies start together, so a
-rollout of T steps sees the same phase of the mission in every copy.
+and step (the paper's raw -J_i returns are -2e11..-4e12 per episode); its first reset spreads the
+copies over the mission, so that a rollout of T steps holds every phase of it.
 """
 
 from __future__ import annotations
