@@ -140,7 +140,7 @@ class ActorCritic(nn.Module):
         critic_in = obs_dim
         if algo == "mappo":
             self.state_norm = RunningNorm(state_dim, obs_clip)
-            critic_in = state_dim + self.n_agents
+            critic_in = state_dim + obs_dim + self.n_agents
         self.critic = MLP(critic_in, hidden, 1, activation, agents, 1.0)
 
     def mean_action(self, obs: torch.Tensor) -> torch.Tensor:
@@ -173,16 +173,20 @@ class ActorCritic(nn.Module):
     def critic_input(
         self, obs: torch.Tensor, state: torch.Tensor | None, agent: torch.Tensor | None
     ) -> torch.Tensor:
-        """The critic's input rows: the normalised observation, or for MAPPO the normalised
-        state (..., S) with the one-hot of ``agent`` (...,) integer ids."""
+        """The critic's input rows: the normalised observation, or for MAPPO the agent-specific
+        global state: the normalised state (..., S), the agent's own normalised observation
+        and the one-hot of ``agent`` (...,) integer ids."""
         if self.algo != "mappo":
             return self.obs_norm(obs)
-        return self.state_rows(self.state_norm(state), agent)
+        return self.state_rows(self.state_norm(state), self.obs_norm(obs), agent)
 
-    def state_rows(self, normed_state: torch.Tensor, agent: torch.Tensor) -> torch.Tensor:
-        """MAPPO's critic rows: a normalised state (..., S) and the one-hot of ``agent``."""
+    def state_rows(
+        self, normed_state: torch.Tensor, normed_obs: torch.Tensor, agent: torch.Tensor
+    ) -> torch.Tensor:
+        """MAPPO's critic rows: a normalised state (..., S), the agent's normalised observation
+        (..., dim) and the one-hot of ``agent``."""
         onehot = one_hot(agent, self.n_agents).to(normed_state.dtype)
-        return torch.cat([normed_state, onehot], dim=-1)
+        return torch.cat([normed_state, normed_obs, onehot], dim=-1)
 
     def value(
         self,

@@ -310,10 +310,10 @@ class OnPolicyTrainer:
             actor_in = model.obs_norm(self.buf_obs.reshape(*rows, self.obs_dim))
             if self.buf_state is None:
                 critic_in = actor_in
-            else:  # row (t, b, n): the state of copy b at step t and agent n's one-hot
+            else:  # row (t, b, n): copy b's state at step t, agent n's observation and one-hot
                 state = model.state_norm(self.buf_state.reshape(T * B, -1))
                 agent = torch.arange(N, device=self.device).repeat(T * B)
-                critic_in = model.state_rows(state.repeat_interleave(N, dim=0), agent)
+                critic_in = model.state_rows(state.repeat_interleave(N, dim=0), actor_in, agent)
         columns = (
             actor_in,
             critic_in,
