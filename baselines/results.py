@@ -59,7 +59,7 @@ def run_record(run: str | Path) -> dict[str, Any]:
     algorithm = config.get("algorithm") or config.get("algo")
     if not algorithm:
         raise ValueError(f"{run}/config.yaml names no algorithm ('algorithm:' or 'algo:')")
-    steps = config.get("agent_steps", config.get("timesteps"))
+    steps = config.get("agent_steps", config.get("timesteps", config.get("frames")))
     return {**config, "algorithm": str(algorithm), "agent_steps": steps}
 
 
