@@ -62,6 +62,7 @@ SHIPPED_MODELS = {
     "paper_dagger": "DAgger students of the exact DMPC on the paper scenario",
     "random_fields_dagger": "DAgger students on random obstacle fields (random_fields)",
     "random_swarm_dagger": "DAgger students on random swarms of 3-10 UAVs (random_swarm)",
+    "paper_ppo": "PPO from the training reward alone (curriculum track, paper) on the paper",
 }
 PAPER_OPTIMIZERS = ("pio", "lfpio")  # the two the paper compares (its Table 2)
 POLICY_LABELS = {
