@@ -65,9 +65,9 @@ def _fly(fast, batched, steps: int, seed: int, noise: float) -> int:
         if not fast.agents:
             _equal(fast.reset(), batched.reset(), f"reset at {k}")
         last, sim = batched.sim.last, batched.sim
+        # sim.offsets are the slots (the mirrored reading resolved by FormationConfig)
         u = consensus_pd(
-            sim.z, last.reference_velocity, last.adjacency, sim.offsets, u_max,
-            mirrored=fast.scenario.formation.mirrored_offsets,
+            sim.z, last.reference_velocity, last.adjacency, sim.offsets, u_max
         )[0] / u_max  # fmt: skip
         u = u + noise * rng.uniform(-1.0, 1.0, u.shape)
         actions = {a: u[i].astype(np.float32) for i, a in enumerate(fast.agents)}

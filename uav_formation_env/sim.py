@@ -360,6 +360,16 @@ class FormationSim:
         self.last = result
         return result
 
+    def _check_observer(self) -> None:
+        """A ``ValueError`` naming ``observer.substeps`` where the estimate is not finite."""
+        obs_cfg = self.scenario.observer
+        if obs_cfg.enabled and not bool(self.xp.isfinite(self.observer.d_hat).all()):
+            raise ValueError(
+                f"the observer diverged (non-finite estimate at t = {float(self.t.max()):g} "
+                f"s): its tick dynamics.dt / observer.substeps = {self.dt / obs_cfg.substeps:g}"
+                " s is too long for its gains; raise observer.substeps"
+            )
+
     def _set_scene(self, copy: int, scene: Scenario) -> None:
         """Write a drawn scene into copy ``copy``'s per-copy arrays."""
         self.offsets[copy] = self._put(scene.formation.slot_offsets)
@@ -394,7 +404,9 @@ class FormationSim:
         if not bool(xp.isfinite(u_n).all()):  # the method: numpy's xp.all adds a Python layer
             raise ValueError("u_n contains NaN or infinite values")
         if self.fast_path is not None:
-            return self.fast_path.step(u_n)
+            result = self.fast_path.step(u_n)
+            self._check_observer()
+            return result
         obs_cfg = self.scenario.observer
         # minimum(maximum(.)) is clip for finite values, without numpy's Python wrappers
         u_max = self.u_max
@@ -408,12 +420,7 @@ class FormationSim:
             self.observer = self._observer_held(
                 self.observer, self.z[..., 3:], a, u, self.dt, obs_cfg
             )
-            if not bool(xp.isfinite(self.observer.d_hat).all()):
-                raise ValueError(
-                    f"the observer diverged (non-finite estimate at t = {float(self.t.max()):g} "
-                    f"s): its tick dynamics.dt / observer.substeps = {self.dt / obs_cfg.substeps:g}"
-                    " s is too long for its gains; raise observer.substeps"
-                )
+            self._check_observer()
         self.z = zoh_step(self.z, a, self.dt)
         self.steps += 1
         # steps x dt: no drift from repeated addition (torch: int x float would be float32)
