@@ -13,7 +13,6 @@ from uav_formation_env.config_io import resolve_scenario, save_scenario, with_ov
 from uav_formation_env.evaluation import make_policy, run_episodes, summarise
 from uav_formation_env.evaluation.heldout import HELDOUT_FILE, heldout_report
 
-MODELS = Path(__file__).resolve().parents[1] / "baselines" / "models"
 
 
 def short_n3(duration: float = 4.0):
@@ -50,21 +49,11 @@ def test_heldout_report_writes_json_and_needs_a_seed(tmp_path: Path) -> None:
 
 
 # ------------------------------------------------------------------------------- run directories
-def test_shipped_sb3_run_directory_evaluates_by_its_directory(tmp_path: Path) -> None:
-    pytest.importorskip("stable_baselines3")
-    policy = make_policy(str(MODELS / "paper_ppo"), resolve_scenario("paper"))
-    assert policy.path.name == "model.zip" and policy.normalizer is not None
-    out = tmp_path / "eval"
-    args = ["evaluate", "--policy", str(MODELS / "paper_ppo"), "--seeds", "1", "--duration", "2"]
-    assert main([*args, "--out", str(out), "--quiet"]) == 0
-    assert (out / "summary.json").is_file()
-
-
 def test_a_directory_without_a_model_is_a_one_line_error(tmp_path: Path, capsys) -> None:
     with pytest.raises(FileNotFoundError, match="holds no model"):
         make_policy(str(tmp_path), resolve_scenario("paper"))
     assert main(["evaluate", "--policy", str(tmp_path), "--out", str(tmp_path / "e")]) == 2
-    assert "policy.pt" in capsys.readouterr().err
+    assert "policy.json" in capsys.readouterr().err
 
 
 def test_cli_train_then_evaluate_the_run_directory(tmp_path: Path, capsys) -> None:
@@ -99,7 +88,8 @@ def test_train_is_a_command_of_its_own(capsys) -> None:
         main(["train", "--help"])
     text = capsys.readouterr().out
     assert text.startswith("usage: uav-formation train")
-    assert "{ppo,sac,rllib-ppo}" in text and "(default: paper)" in text and " s " in text
+    assert "{ppo-fast,mappo,ippo,ppo,sac,rllib-ppo}" in text
+    assert "(default: paper)" in text and " s " in text
     assert set(TRAINERS) >= {"ppo", "sac", "rllib-ppo"}
 
 
@@ -233,7 +223,7 @@ def test_first_use_block_runs_with_the_base_install(monkeypatch, tmp_path: Path)
 
 def test_rllib_recipe_ends_with_the_heldout_report(tmp_path: Path, monkeypatch, capsys) -> None:
     """The RLlib recipe's end (its training needs the RLlib venv, replaced here by a run
-    directory as it writes one): the held-out mission of its policy.pt."""
+    directory as it writes one): the held-out mission of its policy."""
     pytest.importorskip("torch")
     import numpy as np
 
@@ -245,7 +235,8 @@ def test_rllib_recipe_ends_with_the_heldout_report(tmp_path: Path, monkeypatch, 
     def fake_train(args):
         dim = 33  # n3's full observation
         module = NormalisedMLP(np.zeros(dim), np.ones(dim), hidden=(8,))
-        save_policy(module, Path(args.out) / "policy.pt", np.zeros((2, dim), dtype=np.float32))
+        sample = np.zeros((2, dim), dtype=np.float32)
+        save_policy(module, Path(args.out), sample, observation="full")
         save_scenario(scenario, Path(args.out) / "scenario.yaml")
         return {"returns": [float("nan"), -120.5]}
 
