@@ -14,7 +14,6 @@ from uav_formation_env.evaluation import make_policy, run_episodes, summarise
 from uav_formation_env.evaluation.heldout import HELDOUT_FILE, heldout_report
 
 
-
 def short_n3(duration: float = 4.0):
     return with_overrides(resolve_scenario("n3"), {"duration": duration})
 
