@@ -10,8 +10,8 @@ YAML scenario goes through ``uav_formation_task("file.yaml")``.
     python examples/benchmarl_mappo.py --quick --out /tmp/benchmarl   # one tiny iteration on CPU
     uav-formation evaluate --policy runs/benchmarl_mappo --seeds 10
 
-The run directory holds ``policy.pt`` (the shared actor, exported as the BenchMARL recipe does:
-:func:`uav_formation_baselines.benchmarl_train.export_actor`), ``scenario.yaml`` and BenchMARL's
+The run directory holds ``policy.json`` + ``policy.npz`` (the shared actor, exported as the
+BenchMARL recipe does: :func:`uav_formation_baselines.benchmarl_train.export_actor`), ``scenario.yaml`` and BenchMARL's
 experiment folder ``benchmarl/``; the run ends with the mission on held-out seeds beside LFPIO's
 (:func:`uav_formation_env.evaluation.heldout.report_run`). No BenchMARL evaluation, rendering or
 network logger by default (``--loggers csv`` writes CSV files under ``--out``).
@@ -79,12 +79,12 @@ def make_experiment(args: argparse.Namespace, out: Path) -> Experiment:
 
 
 def save_run(experiment: Experiment, out: Path) -> None:
-    """The run directory ``uav-formation evaluate --policy OUT`` flies: policy.pt, scenario."""
+    """The run directory ``uav-formation evaluate --policy OUT`` flies: the policy, scenario."""
     settings = experiment.task.settings
     scenario = resolve_with_overrides(settings.scenario, settings.scenario_overrides())
     save_scenario(scenario, out / "scenario.yaml")
     sample = FormationEpisodes(scenario, 2).reset(seed=[0, 1]).observation
-    export_actor(experiment, out / "policy.pt", sample.reshape(-1, sample.shape[-1]))
+    export_actor(experiment, out, sample.reshape(-1, sample.shape[-1]))
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:

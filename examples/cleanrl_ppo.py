@@ -11,10 +11,10 @@ the value of its ``final_observation``; a terminated one (out of the corridor) i
     python examples/cleanrl_ppo.py --quick --out /tmp/cleanrl  # 1 update of 8 copies x 32 steps
     uav-formation evaluate --policy runs/cleanrl_ppo --seeds 10
 
-The run directory holds ``policy.pt`` (the actor's mean and log-std, the project's exported policy
-contract: :mod:`uav_formation_baselines.torch_policy`) and ``scenario.yaml``; the run ends with
-the mission on held-out seeds beside LFPIO's (:func:`uav_formation_env.evaluation.heldout.
-report_run`).
+The run directory holds ``policy.json`` + ``policy.npz`` (the actor's mean, in the project's
+policy file format: :mod:`uav_formation_baselines.torch_policy`) and ``scenario.yaml``; the
+run ends with the mission on held-out seeds beside LFPIO's
+(:func:`uav_formation_env.evaluation.heldout.report_run`).
 
 The training task (``reward="train"``, docs/training.md) keeps the reward in (0, 1] per UAV
 and step (the paper's raw -J_i returns are -2e11..-4e12 per episode); its first reset spreads the
@@ -105,8 +105,8 @@ def make_episodes(args: argparse.Namespace) -> FormationEpisodes:
 
 
 def save_run(agent: Agent, scenario: Scenario, out: Path, sample: torch.Tensor) -> None:
-    """The run directory ``uav-formation evaluate --policy OUT`` flies: policy.pt, scenario."""
-    save_policy(ExportedActor(agent), out / "policy.pt", sample.numpy())
+    """The run directory ``uav-formation evaluate --policy OUT`` flies: the policy, scenario."""
+    save_policy(ExportedActor(agent), out, sample.numpy(), observation=scenario.observation.kind)
     save_scenario(scenario, out / "scenario.yaml")
 
 

@@ -12,8 +12,8 @@ name of ``SyncDataCollector``, which is deprecated there).
     python examples/torchrl_mappo.py --quick --out /tmp/torchrl   # 2 iterations of 200 frames
     uav-formation evaluate --policy runs/torchrl_mappo --seeds 10
 
-The run directory holds ``policy.pt`` (the shared actor: observation -> tanh of the TanhNormal's
-location, the deterministic action, and log-scale; :mod:`uav_formation_baselines.torch_policy`)
+The run directory holds ``policy.json`` + ``policy.npz`` (the shared actor: observation -> tanh
+of the TanhNormal's location, the deterministic action; :mod:`uav_formation_baselines.torch_policy`)
 and ``scenario.yaml``; the run ends with the mission on held-out seeds beside LFPIO's
 (:func:`uav_formation_env.evaluation.heldout.report_run`).
 
@@ -138,8 +138,8 @@ class ExportedActor(nn.Module):
 
 
 def save_run(actor_net: nn.Sequential, scenario: Scenario, out: Path, sample) -> None:
-    """The run directory ``uav-formation evaluate --policy OUT`` flies: policy.pt, scenario."""
-    save_policy(ExportedActor(actor_net), out / "policy.pt", sample)
+    """The run directory ``uav-formation evaluate --policy OUT`` flies: the policy, scenario."""
+    save_policy(ExportedActor(actor_net), out, sample, observation=scenario.observation.kind)
     save_scenario(scenario, out / "scenario.yaml")
 
 

@@ -80,6 +80,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.training_reward import TERMS
 from uav_formation_env.episode import (
     FormationEpisodes,
     StepResult,
@@ -90,6 +91,7 @@ from uav_formation_env.scenes import draw_scene, n_uav_range
 from uav_formation_env.seeding import check_seed
 
 RENDER_MODES = ["rgb_array", "human"]
+REWARD_TERMS = tuple(f"reward_{name}" for name in TERMS)  # info keys of the training reward
 INFO_MODES = ("numeric", "rich")
 
 
@@ -204,6 +206,9 @@ class UAVFormationParallelEnv(ParallelEnv):
         if self._renderer is not None:
             self._renderer.reset()
         obs, infos = self._observations(), self._infos(np.zeros(len(self._names)))
+        if self.scenario.episode.reward == "train":  # the step's keys, so that specs stay fixed
+            for info in infos.values():
+                info.update(dict.fromkeys(REWARD_TERMS, 0.0))
         if len(self._names) < len(self.possible_agents):
             self._pad_absent(obs, infos)
         return obs, infos
