@@ -214,6 +214,8 @@ class UavFormationTask(Task):
     :class:`UavFormationTaskConfig` fields (missing ones default; the scenario is the member's)."""
 
     PAPER = None
+    HOLD = None
+    TRACK = None
     OPEN_FIELD = None
     WINDY = None
     RANDOM_OBSTACLES = None

@@ -11,8 +11,9 @@ YAML scenario goes through ``uav_formation_task("file.yaml")``.
     uav-formation evaluate --policy runs/benchmarl_mappo --seeds 10
 
 The run directory holds ``policy.json`` + ``policy.npz`` (the shared actor, exported as the
-BenchMARL recipe does: :func:`uav_formation_baselines.benchmarl_train.export_actor`), ``scenario.yaml`` and BenchMARL's
-experiment folder ``benchmarl/``; the run ends with the mission on held-out seeds beside LFPIO's
+BenchMARL recipe does: :func:`uav_formation_baselines.benchmarl_train.export_actor`),
+``scenario.yaml`` and BenchMARL's experiment folder ``benchmarl/``; the run ends with the mission on
+held-out seeds beside LFPIO's
 (:func:`uav_formation_env.evaluation.heldout.report_run`). No BenchMARL evaluation, rendering or
 network logger by default (``--loggers csv`` writes CSV files under ``--out``).
 """

@@ -114,9 +114,10 @@ def make_modules(env, hidden: int) -> tuple[ProbabilisticActor, TensorDictModule
 
 
 class ExportedActor(nn.Module):
-    """The shared actor as the exported policy contract: (M, dim) -> (M, 6), the deterministic
-    action tanh(loc) of the TanhNormal over [-1, 1] and log(scale). ``MultiAgentMLP`` keeps the
-    shared parameters apart from its layers; they are copied into a plain ``nn.Sequential``."""
+    """The shared actor as the exported policy contract: (M, dim) -> (M, 6), the TanhNormal's
+    loc (the deterministic action is tanh(loc), the policy file's ``"tanh"``) and log(scale).
+    ``MultiAgentMLP`` keeps the shared parameters apart from its layers; they are copied into a
+    plain ``nn.Sequential``."""
 
     def __init__(self, actor_net: nn.Sequential) -> None:
         super().__init__()
@@ -134,12 +135,13 @@ class ExportedActor(nn.Module):
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         loc, scale = self.extract(self.net(obs))
-        return torch.cat([torch.tanh(loc), scale.log()], dim=-1)
+        return torch.cat([loc, scale.log()], dim=-1)
 
 
 def save_run(actor_net: nn.Sequential, scenario: Scenario, out: Path, sample) -> None:
     """The run directory ``uav-formation evaluate --policy OUT`` flies: the policy, scenario."""
-    save_policy(ExportedActor(actor_net), out, sample, observation=scenario.observation.kind)
+    kind = scenario.observation.kind  # the exported actor's first 3 outputs are loc: tanh(loc)
+    save_policy(ExportedActor(actor_net), out, sample, observation=kind, action="tanh")
     save_scenario(scenario, out / "scenario.yaml")
 
 
