@@ -91,7 +91,7 @@ def test_report_reads_without_the_paper(quick_run):
         "**eq. 23**",
     ):
         assert symbol in guide, symbol
-    assert "depends on that seed alone" in report
+    assert "does not depend on the other seeds of" in report
     assert "other seeds of its batch" not in report
 
 
