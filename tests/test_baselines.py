@@ -298,8 +298,9 @@ def test_shipped_models_fly_their_scenario(name):
     # ... and acts as the teacher it was cloned from would, on the states it flies into: the
     # shipped clones are at 0.31-0.60 of the teacher's action norm, a policy blind to its
     # observation (zeros in) at 1.0-1.96 (it flies the formation safely through 2 s all the same)
-    difference = np.linalg.norm(np.array(actions) - np.array(teacher_actions))
-    assert difference / np.linalg.norm(teacher_actions) < 0.8
+    if name.endswith("_dagger"):  # a clone; paper_ppo learned from the reward alone
+        difference = np.linalg.norm(np.array(actions) - np.array(teacher_actions))
+        assert difference / np.linalg.norm(teacher_actions) < 0.8
 
 
 def _teacher_of(path: Path, scenario):
