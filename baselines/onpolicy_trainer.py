@@ -419,9 +419,11 @@ class OnPolicyTrainer:
         }
 
     def save(self) -> None:
-        """Policy files, checkpoint and config.yaml, each replaced atomically."""
+        """Policy files, checkpoint, config.yaml and the current task's scenario.yaml (what
+        evaluation flies the policy on), each replaced atomically."""
         meta = self.metadata()
         export_policy(self.out, self.model, self.scenario, meta)
+        atomic_write(self.out / "scenario.yaml", lambda path: save_scenario(self.scenario, path))
         checkpoint = {
             "model": self.model.state_dict(),
             "optimizer": self.optimizer.state_dict(),

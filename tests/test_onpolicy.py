@@ -23,7 +23,7 @@ from uav_formation_baselines.onpolicy_trainer import (
     build_scenario,
     gae,
 )
-from uav_formation_env.config_io import resolve_scenario, with_overrides
+from uav_formation_env.config_io import load_scenario, resolve_scenario, with_overrides
 
 TINY = {
     "copies": 4,
@@ -298,6 +298,8 @@ def test_curriculum_moves_up_after_a_completed_evaluation(tmp_path: Path) -> Non
     assert trainer.scenario.name == "hold" and not trainer.promote()  # no evaluation yet
     trainer.evaluate()
     assert trainer.promote() and trainer.scenario.name == "track"
+    trainer.save()  # evaluation flies a run on its scenario.yaml: the task it ended on
+    assert load_scenario(tmp_path / "scenario.yaml").name == "track"
     assert trainer.episodes.scenario.name == "track" and trainer.metadata()["curriculum"] == [
         "hold",
         "track",
