@@ -158,7 +158,12 @@ def test_a_plain_mlp_exports_its_first_three_outputs(tmp_path: Path) -> None:
 
 # ------------------------------------------------------------------------- shipped models
 def test_shipped_models_are_named_in_the_help() -> None:
-    assert sorted(SHIPPED_MODELS) == ["paper_dagger", "random_fields_dagger", "random_swarm_dagger"]
+    assert sorted(SHIPPED_MODELS) == [
+        "paper_dagger",
+        "paper_ppo",
+        "random_fields_dagger",
+        "random_swarm_dagger",
+    ]
     for name in SHIPPED_MODELS:
         assert name in POLICY_HELP
         assert (MODELS_DIR / name / "policy.json").is_file()

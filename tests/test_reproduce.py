@@ -92,7 +92,7 @@ def test_report_reads_without_the_paper(quick_run):
     ):
         assert symbol in guide, symbol
     assert "does not depend on the other seeds of" in report
-    assert "other seeds of its batch" not in report
+    assert "episode depends on the other seeds" not in report  # the stale claim
 
 
 def test_figures_and_report(quick_run):
