@@ -35,6 +35,10 @@ def _finite(value: float, field_name: str) -> None:
     _require(math.isfinite(value), field_name, f"must be finite, got {value!r}")
 
 
+def _one_of(value: object, choices: tuple, field_name: str) -> None:
+    _require(value in choices, field_name, f"must be one of {choices}, got {value!r}")
+
+
 def _positive(value: float, field_name: str) -> None:
     _finite(value, field_name)
     _require(value > 0, field_name, f"must be > 0, got {value!r}")
@@ -601,11 +605,7 @@ class ObservationConfig:
         )
         if self.sensing_radius is not None:
             _positive(self.sensing_radius, "observation.sensing_radius")
-        _require(
-            self.kind in OBSERVATION_KINDS,
-            "observation.kind",
-            f"must be one of {OBSERVATION_KINDS}, got {self.kind!r}",
-        )
+        _one_of(self.kind, OBSERVATION_KINDS, "observation.kind")
         for name in ("neighbours", "obstacles", "nearest"):
             value = getattr(self, name)
             least = 0 if name == "nearest" else 1
@@ -715,33 +715,17 @@ class EpisodeConfig:
     max_cycles: int = 0  # truncate after this many steps of an episode; 0 = off [steps]
 
     def __post_init__(self) -> None:
-        _require(
-            self.action in ACTION_MODES,
-            "episode.action",
-            f"must be one of {ACTION_MODES}, got {self.action!r}",
-        )
+        _one_of(self.action, ACTION_MODES, "episode.action")
         _positive(self.velocity_range, "episode.velocity_range")
         _positive(self.velocity_gain, "episode.velocity_gain")
-        _require(
-            self.reward in REWARD_TRANSFORMS,
-            "episode.reward",
-            f"must be one of {REWARD_TRANSFORMS}, got {self.reward!r}",
-        )
+        _one_of(self.reward, REWARD_TRANSFORMS, "episode.reward")
         _positive(self.reward_scale, "episode.reward_scale")
         _non_negative(self.max_formation_error, "episode.max_formation_error")
         _non_negative(self.max_velocity_error, "episode.max_velocity_error")
         _non_negative(self.corridor_width, "episode.corridor_width")
         _non_negative(self.corridor_penalty, "episode.corridor_penalty")
-        _require(
-            self.start in START_MODES,
-            "episode.start",
-            f"must be one of {START_MODES}, got {self.start!r}",
-        )
-        _require(
-            self.start_controller in START_CONTROLLERS,
-            "episode.start_controller",
-            f"must be one of {START_CONTROLLERS}, got {self.start_controller!r}",
-        )
+        _one_of(self.start, START_MODES, "episode.start")
+        _one_of(self.start_controller, START_CONTROLLERS, "episode.start_controller")
         _require(
             isinstance(self.max_cycles, int)
             and not isinstance(self.max_cycles, bool)
