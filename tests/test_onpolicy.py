@@ -24,6 +24,7 @@ from uav_formation_baselines.onpolicy_trainer import (
     gae,
 )
 from uav_formation_env.config_io import load_scenario, resolve_scenario, with_overrides
+from uav_formation_env.policies.policy_file import load_policy_file
 
 TINY = {
     "copies": 4,
@@ -109,6 +110,21 @@ def test_export_round_trips(tmp_path: Path, algo: str):
     expected = TorchActorPolicy(model).act_batch(obs)
     assert (np.abs(expected) == 1.0).any() and (np.abs(expected) < 1.0).any()
     np.testing.assert_allclose(_numpy_actor(tmp_path, obs), expected, atol=1e-5)
+    np.testing.assert_allclose(load_policy_file(tmp_path).act_batch(obs), expected, atol=1e-5)
+
+
+def test_a_per_agent_file_flies_only_its_number_of_uavs(tmp_path: Path):
+    model = ActorCritic("ippo", 7, 3, 1, (16, 8), "tanh", -1.0, 3.0)
+    export_policy(tmp_path, model, resolve_scenario("paper"), {"algorithm": "ippo"})
+    policy = load_policy_file(tmp_path)
+    assert policy.agents == 3
+    with pytest.raises(ValueError, match="one network per UAV for 3 UAVs, got observations of 5"):
+        policy.act_batch(np.zeros((2, 5, 7)))
+    with pytest.raises(ValueError, match="needs a shared policy"):
+        policy.act_flat(np.zeros((2, 7)))
+    with pytest.raises(ValueError, match="needs a shared policy"):
+        policy.parts()
+    assert policy.act_batch(np.zeros((2, 3, 7))).shape == (2, 3, 3)
 
 
 @pytest.mark.parametrize("algo", ["ppo", "mappo", "ippo"])

@@ -7,6 +7,9 @@ and ``m{j}.b{l}`` (out,). The action of one observation is: x = (obs - obs_mean)
 clipped to +-``observation_clip`` when set; per member h = act(W h + b) through the hidden
 layers and a linear last layer of 3 outputs; the members' mean; then ``"clip"`` to [-1, 1] or
 ``"tanh"``. Every trainer of the project that exports a torch policy writes this format.
+
+A file with ``"agents": N`` in its header holds one network per UAV (IPPO): every weight has a
+leading N axis (``m{j}.w{l}`` (N, out, in), ``m{j}.b{l}`` (N, out)) and UAV i flies network i.
 """
 
 from __future__ import annotations
@@ -167,6 +170,9 @@ def _check_header(header: Mapping[str, Any], where: str) -> None:
     clip = header.get("observation_clip")
     if clip is not None and not (isinstance(clip, int | float) and clip > 0):
         raise ValueError(f"{where}: observation_clip is {clip!r}, expected null or a number > 0")
+    agents = header.get("agents")
+    if agents is not None and not _positive_int(agents):
+        raise ValueError(f"{where}: agents is {agents!r}, expected null or a positive integer")
 
 
 def _positive_int(value: Any) -> bool:
@@ -244,6 +250,7 @@ class FilePolicy(PolicyBase):
         except Exception as error:  # noqa: BLE001 - zipfile, OSError, ValueError on bad files
             raise ValueError(f"{arrays_path}: not a readable numpy archive ({error})") from None
         self.observation_size = int(header["observation_dim"])
+        self.agents: int | None = header.get("agents")
         self._mean, self._std = self._take(arrays, "obs_mean"), self._take(arrays, "obs_std")
         self._members = [
             [
@@ -253,7 +260,8 @@ class FilePolicy(PolicyBase):
             for j in range(header["members"])
         ]
         try:
-            _check_members(self._members, self.observation_size, {})
+            for networks in self._per_agent(self._members):
+                _check_members(networks, self.observation_size, {})
         except ValueError as error:
             raise ValueError(f"{arrays_path}: {error}") from None
         if self._mean.shape != (self.observation_size,) or self._std.shape != self._mean.shape:
@@ -267,8 +275,37 @@ class FilePolicy(PolicyBase):
             raise ValueError(f"{self.path / ARRAYS_NAME}: missing array {name!r}")
         return arrays[name]
 
+    def _per_agent(self, members: list[Layers]) -> list[list[Layers]]:
+        """The members as one list per UAV's networks ([members] for a shared file); a
+        ``ValueError`` when an array lacks the leading ``agents`` axis."""
+        if self.agents is None:
+            return [members]
+        for j, layers in enumerate(members):
+            for index, (weight, bias) in enumerate(layers):
+                if (
+                    weight.ndim != 3
+                    or weight.shape[0] != self.agents
+                    or bias.shape[:1] != (self.agents,)
+                ):
+                    raise ValueError(
+                        f"m{j}.w{index} is {weight.shape} with bias {bias.shape}, expected a "
+                        f"leading axis of agents = {self.agents}"
+                    )
+        return [
+            [[(weight[a], bias[a]) for weight, bias in layers] for layers in members]
+            for a in range(self.agents)
+        ]
+
+    def _shared_only(self, what: str) -> None:
+        if self.agents is not None:
+            raise ValueError(
+                f"the model {str(self.path)!r} has one network per UAV ({self.agents}); "
+                f"{what} needs a shared policy: use act_batch on (B, {self.agents}, dim)"
+            )
+
     def parts(self) -> list[tuple[Layers, np.ndarray, np.ndarray]]:
         """Per member, (its layers, obs_mean, obs_std): the input of :func:`merge_members`."""
+        self._shared_only("merging into an ensemble")
         return [(layers, self._mean, self._std) for layers in self._members]
 
     def check_scenario(self, scenario: Scenario) -> None:
@@ -280,27 +317,40 @@ class FilePolicy(PolicyBase):
                 f"of {self.observation_size} values, but scenario {scenario.name!r} "
                 f"({scenario.n_uav} UAVs) gives {kind} observations of {expected}"
             )
+        if self.agents is not None and scenario.n_uav != self.agents:
+            raise ValueError(
+                f"the model {str(self.path)!r} has one network per UAV for {self.agents} UAVs, "
+                f"but scenario {scenario.name!r} has {scenario.n_uav}"
+            )
 
-    def outputs(self, flat: np.ndarray) -> np.ndarray:
-        """(M, dim) observations -> (M, 3) the members' mean output, before ``action``."""
-        x = (np.asarray(flat, dtype=np.float64) - self._mean) / self._std
+    def _mean_output(self, obs: np.ndarray) -> np.ndarray:
+        """(..., dim) observations -> (..., 3) the members' mean output; with ``agents``, obs is
+        (B, agents, dim) and UAV i's row goes through network i."""
+        x = (np.asarray(obs, dtype=np.float64) - self._mean) / self._std
         clip = self.header["observation_clip"]
         if clip is not None:
             x = np.clip(x, -clip, clip)
-        total = np.zeros((x.shape[0], 3))
+        total = np.zeros((*x.shape[:-1], 3))
         for layers in self._members:
             h = x
             for index, (weight, bias) in enumerate(layers):
-                h = h @ weight.T + bias
+                h = _linear(h, weight, bias)
                 if index < len(layers) - 1:
                     h = self._activation(h)
             total += h
         return total / len(self._members)
 
+    def _squash(self, output: np.ndarray) -> np.ndarray:
+        return np.tanh(output) if self.header["action"] == "tanh" else np.clip(output, -1.0, 1.0)
+
+    def outputs(self, flat: np.ndarray) -> np.ndarray:
+        """(M, dim) observations -> (M, 3) the members' mean output, before ``action``."""
+        self._shared_only("outputs of (M, dim) observations")
+        return self._mean_output(flat)
+
     def act_flat(self, flat: np.ndarray) -> np.ndarray:
         """(M, dim) observations -> (M, 3) actions in [-1, 1]."""
-        mean = self.outputs(flat)
-        return np.tanh(mean) if self.header["action"] == "tanh" else np.clip(mean, -1.0, 1.0)
+        return self._squash(self.outputs(flat))
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
         """(B, N, dim) observations -> (B, N, 3) actions."""
@@ -311,4 +361,18 @@ class FilePolicy(PolicyBase):
                 f"observations, got {obs.shape}"
             )
         batch, n, dim = obs.shape
+        if self.agents is not None:
+            if n != self.agents:
+                raise ValueError(
+                    f"the model {str(self.path)!r} has one network per UAV for {self.agents} "
+                    f"UAVs, got observations of {n}"
+                )
+            return self._squash(self._mean_output(obs))
         return self.act_flat(obs.reshape(batch * n, dim)).reshape(batch, n, 3)
+
+
+def _linear(h: np.ndarray, weight: np.ndarray, bias: np.ndarray) -> np.ndarray:
+    """One layer: (M, in) @ (out, in)^T, or per agent (B, N, in) with (N, out, in) weights."""
+    if weight.ndim == 3:
+        return np.einsum("bni,noi->bno", h, weight) + bias
+    return h @ weight.T + bias
