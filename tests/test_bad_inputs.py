@@ -314,6 +314,11 @@ def existing_gif(tmp_path: Path) -> Path:
 # (id, argv (tmp_path -> list), pattern of the one error line)
 CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("zero seeds", lambda t: ["evaluate", "--seeds", "0"], r"--seeds: expected an integer >= 1"),
+    (
+        "zero batch size",
+        lambda t: ["evaluate", "--batch-size", "0"],
+        r"--batch-size: expected an integer >= 1",
+    ),
     ("word for seeds", lambda t: ["evaluate", "--seeds", "abc"], r"expected an integer, got 'abc'"),
     ("negative seed start", lambda t: ["evaluate", "--seed-start", "-2"], r"--seed-start"),
     ("negative duration", lambda t: ["evaluate", "--duration", "-1"], r"--duration: .*> 0"),

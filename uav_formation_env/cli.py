@@ -175,10 +175,11 @@ def _mission_lines(summary: dict) -> list[str]:
 def _evaluate(args: argparse.Namespace) -> int:
     from uav_formation_env.core.array_api import torch_device
     from uav_formation_env.evaluation import (
+        digest,
+        fly_in_chunks,
         json_ready,
         make_policy,
-        run_episode_groups,
-        summarise_groups,
+        summarise_digests,
         write_json,
         write_records,
     )
@@ -231,36 +232,56 @@ def _evaluate(args: argparse.Namespace) -> int:
         )
         if args.shield:
             policy = SafetyShield(policy, scenario)
-        check_out(args.out, args.overwrite)  # before the episodes, which write nothing
-        batches = run_episode_groups(
-            scenario,
-            policy,
-            seeds,
-            policy_name=args.policy + (" + shield" if args.shield else ""),
-            progress=_progress(args),
-            desc=desc,
-            **options,
-        )
-    summary = json_ready(summarise_groups(batches))
-    if args.shield:
-        summary["shield"] = {
-            "config": asdict(policy.config),
-            "intervention_rate": policy.intervention_rate,
-        }
-    names = ["records.csv"] if len(batches) == 1 else []
-    if not names:  # one table per N: its rows are per UAV
-        names = [f"records_n{batch.z.shape[2]}.csv" for batch in batches]
+        batches = None
+    label = args.policy + (" + shield" if args.shield else "")
+    first: list = []  # the first batch's first seed, for the figure
+    shielded_steps = [0, 0]  # the shield's interventions and UAV-steps over every batch
     with run_folder(args.out, overwrite=args.overwrite, command="evaluate") as out:
-        for batch, name in zip(batches, names, strict=True):
-            write_records(batch, out / name)
+
+        def record(batch) -> None:  # per-step rows, appended chunk after chunk
+            path = out / f"records_n{batch.z.shape[2]}.csv"
+            write_records(batch, path, append=path.exists())
+            if not first:
+                first.append((batch.z[:, 0, :, :3], batch.scenes, batch.seeds[0]))
+            if args.shield:
+                shielded_steps[0] += policy.interventions
+                shielded_steps[1] += policy.uav_steps
+
+        if batches is None:  # local or torch: chunks of --batch-size seeds, digested as flown
+            digests = fly_in_chunks(
+                scenario,
+                policy,
+                seeds,
+                args.batch_size,
+                on_batch=record,
+                policy_name=label,
+                progress=_progress(args),
+                desc=desc,
+                **options,
+            )
+        else:
+            for batch in batches:
+                record(batch)
+            digests = [digest(batch) for batch in batches]
+        summary = json_ready(summarise_digests(digests))
+        tables = sorted(out.glob("records_n*.csv"))
+        names = [path.name for path in tables]
+        if len(tables) == 1:  # one N: one table
+            tables[0].rename(out / "records.csv")
+            names = ["records.csv"]
+        if args.shield:
+            summary["shield"] = {
+                "config": asdict(policy.config),
+                "intervention_rate": shielded_steps[0] / max(shielded_steps[1], 1),
+            }
         write_json(summary, out / "summary.json")
-        batch = batches[0]
+        positions, scenes, seed = first[0]
         plot_trajectories(
-            batch.z[:, 0, :, :3],
-            scenario if batch.scenes is None else batch.scenes[0],  # the first seed's scene
+            positions,
+            scenario if scenes is None else scenes[0],  # the first seed's scene
             out / "trajectories.png",
             title=f"{args.policy}{' + safety shield' if args.shield else ''}, observer "
-            f"{'on' if scenario.observer.enabled else 'off'}, seed {batch.seeds[0]}",
+            f"{'on' if scenario.observer.enabled else 'off'}, seed {seed}",
         )
     observer = "on" if scenario.observer.enabled else "off"
     shielded = " behind the safety shield" if args.shield else ""
@@ -525,6 +546,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="fly the policy behind the safety shield (control barrier functions that keep "
         "each UAV out of the obstacles and away from the UAVs it senses; local observation "
         "layout): the result is the policy and the shield",
+    )
+    evaluate.add_argument(
+        "--batch-size",
+        type=integer_at_least(1),
+        default=100,
+        help="seeds flown as one batch; memory holds one batch (about 4 MB per 200 s episode "
+        "of 5 UAVs), the summary and records are those of every seed",
     )
     _add_common(evaluate, model_scenario=True)
     evaluate.set_defaults(func=_evaluate)

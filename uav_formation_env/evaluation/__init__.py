@@ -19,6 +19,13 @@ reference DMPC, from a name of :data:`POLICY_NAMES` (:mod:`uav_formation_env.pol
 Metrics: :func:`summarise` (its docstring lists every key, with units).
 """
 
+from uav_formation_env.evaluation.digest import (
+    BatchDigest,
+    digest,
+    fly_in_chunks,
+    summarise_digests,
+    summarise_groups,
+)
 from uav_formation_env.evaluation.metrics import (
     OBSERVER_WARMUP_S,
     formation_rmse,
@@ -27,7 +34,6 @@ from uav_formation_env.evaluation.metrics import (
     observer_rms,
     obstacle_events,
     summarise,
-    summarise_groups,
 )
 from uav_formation_env.evaluation.mission import (
     MissionMetrics,
@@ -69,6 +75,7 @@ __all__ = [
     "POLICY_NAMES",
     "RECORD_COLUMNS",
     "SB3_ALGORITHMS",
+    "BatchDigest",
     "BatchPolicy",
     "EpisodeBatch",
     "HeuristicPolicy",
@@ -79,6 +86,8 @@ __all__ = [
     "formation_rmse",
     "concatenate_batches",
     "concatenate_missions",
+    "digest",
+    "fly_in_chunks",
     "json_ready",
     "make_policy",
     "mean_ci95",
@@ -96,6 +105,7 @@ __all__ = [
     "run_episode_groups",
     "run_episodes",
     "summarise",
+    "summarise_digests",
     "summarise_groups",
     "write_json",
     "write_records",

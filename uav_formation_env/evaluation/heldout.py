@@ -20,8 +20,7 @@ from typing import Any
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import load_scenario, with_overrides
-from uav_formation_env.evaluation.metrics import summarise_groups
-from uav_formation_env.evaluation.runner import run_episode_groups
+from uav_formation_env.evaluation.digest import fly_in_chunks, summarise_digests
 from uav_formation_env.policies.registry import BatchPolicy, make_policy
 from uav_formation_env.tasks import evaluation_scenario
 
@@ -29,6 +28,7 @@ __all__ = ["HELDOUT_FILE", "HELDOUT_SEEDS", "HeldoutReport", "heldout_report", "
 
 HELDOUT_SEEDS = (0, 1, 2)  # the first evaluation seeds (training uses 1000+ and 5000+)
 HELDOUT_FILE = "heldout.json"
+HELDOUT_BATCH_SIZE = 100  # seeds flown at once (the memory of one batch)
 
 
 @dataclass(frozen=True)
@@ -100,10 +100,16 @@ class HeldoutReport:
 
 
 def _fly(scenario: Scenario, policy: BatchPolicy, seeds: Sequence[int], name: str, progress: bool):
-    batches = run_episode_groups(
-        scenario, policy, list(seeds), policy_name=name, progress=progress, desc=f"held out: {name}"
+    digests = fly_in_chunks(
+        scenario,
+        policy,
+        list(seeds),
+        HELDOUT_BATCH_SIZE,
+        policy_name=name,
+        progress=progress,
+        desc=f"held out: {name}",
     )
-    return summarise_groups(batches)
+    return summarise_digests(digests)
 
 
 def heldout_report(

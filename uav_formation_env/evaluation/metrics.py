@@ -9,7 +9,6 @@ import numpy as np
 from uav_formation_env.core.cost import anchored
 from uav_formation_env.evaluation.mission import (
     MissionMetrics,
-    concatenate_missions,
     mean_ci95,
     mission_metrics,
     mission_summary,
@@ -57,16 +56,23 @@ def observer_rms(batch: EpisodeBatch, after: float = OBSERVER_WARMUP_S) -> np.nd
 def obstacle_events(batch: EpisodeBatch) -> dict[str, dict[str, Any]]:
     """Per obstacle ``O1, O2, ...``: activation / restore times per seed and their mean, and the
     case (1 = one group, 2 = split)."""
+    return events_of(batch.activation_time, batch.restore_time, batch.case)
+
+
+def events_of(
+    activation_time: np.ndarray, restore_time: np.ndarray, case: np.ndarray
+) -> dict[str, dict[str, Any]]:
+    """:func:`obstacle_events` of (B, O) activation and restore times [s] (NaN: never) and
+    cases."""
     events = {}
-    for o in range(batch.activation_time.shape[1]):
-        act = batch.activation_time[:, o]
-        res = batch.restore_time[:, o]
+    for o in range(activation_time.shape[1]):
+        act, res = activation_time[:, o], restore_time[:, o]
         events[f"O{o + 1}"] = {
             "activate_s": _nan_mean(act),
             "restore_s": _nan_mean(res),
             "activate_s_per_seed": _none_for_nan(act),
             "restore_s_per_seed": _none_for_nan(res),
-            "case_per_seed": [int(c) for c in batch.case[:, o]],
+            "case_per_seed": [int(c) for c in case[:, o]],
         }
     return events
 
@@ -197,72 +203,6 @@ def summarise(batch: EpisodeBatch) -> dict[str, Any]:
             ratio = batch.j_exec[batch.triggered] / batch.j_pre[batch.triggered]
             summary["optimiser_cost_ratio_median"] = float(np.median(ratio))
     return summary
-
-
-def summarise_groups(batches: list[EpisodeBatch]) -> dict[str, Any]:
-    """:func:`summarise` of the groups of :func:`~uav_formation_env.evaluation.
-    run_episode_groups` (one group: its summary, unchanged).
-
-    Over several groups (a distribution over N): the cost, mission, separation, collision,
-    trigger and timing entries over every seed (seeds in group order), ``n_uav_per_seed``, and
-    each group's own summary under ``groups`` (keyed by N).
-    """
-    parts = [summarise(batch) for batch in batches]
-    if len(parts) == 1:
-        return parts[0]
-    first = batches[0]
-    seeds = [seed for batch in batches for seed in batch.seeds]
-    realised = np.concatenate([batch.stage_cost.sum(axis=0).mean(axis=1) for batch in batches])
-    mean, cost_ci95 = mean_ci95(realised)
-    returns = np.concatenate([batch.reward.sum(axis=0).mean(axis=1) for batch in batches])
-    triggers = [p["triggers_per_uav_per_seed"] for p in parts]
-    per_seed_triggers = (
-        None
-        if any(t is None for t in triggers)
-        else [float(np.mean(row)) for t in triggers for row in t]
-    )
-    seconds = sum(batch.wall_seconds for batch in batches)
-    terms = [cost_terms_per_seed(batch) for batch in batches]
-
-    def joined(key: str) -> list[Any]:
-        return [value for p in parts for value in p[key]]
-
-    return {
-        "policy": first.policy_name,
-        "scenario": first.scenario.name,
-        "observer": bool(first.scenario.observer.enabled),
-        "seeds": seeds,
-        "n_uav_per_seed": [batch.z.shape[2] for batch in batches for _ in batch.seeds],
-        "duration_s": float(first.scenario.duration),
-        "n_steps": first.n_steps,
-        "triggers_mean": None if per_seed_triggers is None else float(np.mean(per_seed_triggers)),
-        "triggers_per_seed": per_seed_triggers,
-        "realised_cost_mean": mean,
-        "realised_cost_ci95": cost_ci95,
-        "realised_cost_per_seed": realised.tolist(),
-        "realised_cost_terms": {
-            name: float(np.concatenate([t[name] for t in terms]).mean()) for name in terms[0]
-        },
-        "reward": first.scenario.episode.reward,
-        "return_mean": float(returns.mean()),
-        "return_ci95": mean_ci95(returns)[1],
-        "return_per_seed": returns.tolist(),
-        "mission": mission_summary(
-            concatenate_missions([mission_of(batch) for batch in batches]), seeds
-        ),
-        "formation_rmse_m": float(np.mean(joined("formation_rmse_m_per_seed"))),
-        "formation_rmse_m_per_seed": joined("formation_rmse_m_per_seed"),
-        "min_separation_m": min(p["min_separation_m"] for p in parts),
-        "collisions": sum(p["collisions"] for p in parts),
-        "collisions_per_seed": joined("collisions_per_seed"),
-        "seconds_per_batch": seconds,
-        "seconds_per_episode": seconds / len(seeds),
-        # one control step of every seed: the groups' batched calls one after the other
-        "policy_time_per_step_s": sum(float(b.policy_seconds.sum()) for b in batches)
-        / first.n_steps,
-        "wall_time_per_step_s": seconds / first.n_steps,
-        "groups": {str(batch.z.shape[2]): part for batch, part in zip(batches, parts)},
-    }
 
 
 def nash_gap_summary(batch: EpisodeBatch) -> dict[str, Any] | None:

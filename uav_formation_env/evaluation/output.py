@@ -36,11 +36,12 @@ RECORD_COLUMNS = (
 )
 
 
-def write_records(batch: EpisodeBatch, path: str | Path) -> None:
+def write_records(batch: EpisodeBatch, path: str | Path, append: bool = False) -> None:
     """Per-step CSV, one row per seed, step (1..T) and UAV (1..N), columns
     :data:`RECORD_COLUMNS`: the state, reference, estimate, group and distances after the step;
     the inputs, disturbance and stage cost of the step; the policy's trigger and J values of the
-    decision that produced the step's input (empty for policies without records)."""
+    decision that produced the step's input (empty for policies without records).
+    ``append``: add the rows to an existing table (no header), e.g. batch after batch."""
     T, B, N = batch.stage_cost.shape
     seed = np.broadcast_to(np.asarray(batch.seeds)[None, :, None], (T, B, N))
     step = np.broadcast_to(np.arange(1, T + 1)[:, None, None], (T, B, N))
@@ -74,8 +75,9 @@ def write_records(batch: EpisodeBatch, path: str | Path) -> None:
     formats = ["%d" if name in integer else "%.6g" for name in RECORD_COLUMNS]
     if batch.triggered is None:
         formats[RECORD_COLUMNS.index("triggered")] = "%.6g"
-    with open(path, "w", newline="") as stream:
-        stream.write(",".join(RECORD_COLUMNS) + "\n")
+    with open(path, "a" if append else "w", newline="") as stream:
+        if not append:
+            stream.write(",".join(RECORD_COLUMNS) + "\n")
         np.savetxt(stream, table, fmt=formats, delimiter=",")
 
 
