@@ -527,7 +527,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate = sub.add_parser(
         "evaluate",
         help="evaluate a policy over seeds: mission metrics, per-step CSV, summary.json",
-        description="Run one policy on B seeds as one batch and write records.csv, "
+        description="Run one policy on seeds (in batches of --batch-size) and write records.csv, "
         "summary.json (cost and mission metrics: route error, obstacles met, collisions after "
         "t = 0, completion) and trajectories.png (first seed).",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
