@@ -11,9 +11,10 @@ The output directory holds ``model.zip``, ``obs_stats.npz`` (load both with ``ua
 --policy DIR``) and ``vecnormalize.pkl`` (to resume), ``heldout.json`` (the mission on held-out
 seeds beside LFPIO's, printed at the end: :func:`uav_formation_env.evaluation.heldout.
 heldout_report`), ``config.yaml`` (resolved hyper-parameters, scenario, seed, timesteps, wall
-time), ``scenario.yaml`` (the evaluated scenario), ``progress.csv`` and ``tensorboard/`` (SB3
-logger), and with evaluation on ``evaluations.csv`` and ``best/`` (model and statistics of the
-best evaluation), with checkpoints on ``checkpoints/<steps>/``.
+time), ``scenario.yaml`` (the scenario trained on, with its episode options; evaluation
+flies it under :func:`uav_formation_env.tasks.evaluation_scenario`'s rules), ``progress.csv``
+and ``tensorboard/`` (SB3 logger), and with evaluation on ``evaluations.csv`` and ``best/``
+(model and statistics of the best evaluation), with checkpoints on ``checkpoints/<steps>/``.
 
 The run is written beside ``--out`` and moved into place when it ends
 (:mod:`uav_formation_env.run_folder`): a non-empty ``--out`` needs ``--overwrite``. Ctrl-C
@@ -146,7 +147,7 @@ def _learn(cls, scen, training, algo_kwargs, out, timesteps, seed, progress, std
         FormationEvalCallback,
         save_run,
     )
-    from uav_formation_baselines.wrappers import make_training_env
+    from uav_formation_baselines.wrappers import make_training_env, training_scenario
 
     env, base = make_training_env(scen, training, gamma=float(algo_kwargs.get("gamma", 0.99)))
     model = cls(training["policy"], env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
@@ -169,7 +170,7 @@ def _learn(cls, scen, training, algo_kwargs, out, timesteps, seed, progress, std
         interrupted = True  # save the model reached; the run folder is still moved into place
     wall = time.perf_counter() - start
     save_run(model, out)
-    save_scenario(scen, out / "scenario.yaml")
+    save_scenario(training_scenario(scen, training), out / "scenario.yaml")
     model.logger.close()  # its files are complete before the folder moves into place
     env.close()
     return model, base, wall, interrupted
@@ -192,11 +193,8 @@ Train one policy shared by all UAVs and save a run directory that
 --heldout-seeds held-out seeds (0, 1, ...) and the mission is printed beside the
 training reward.
 
---algo ppo / sac: stable-baselines3 over the batched VecEnv (the [rl] extra). PPO on
-the paper's scenario learned at 2,000-8,000 agent-steps/s on one core of a 2-core machine
-shared with other jobs (the shipped paper_ppo's config.yaml: 11,000/s), plus one
-evaluation (4 episodes) every eval_freq agent-steps and ~10 s of held-out flights at the
-end: --timesteps 20000 took 15-25 s in all. SAC is ~5x slower per agent-step.
+--algo ppo / sac: stable-baselines3 over the batched VecEnv (the [rl] extra), with one
+evaluation (4 episodes) every eval_freq agent-steps and held-out flights at the end.
 --algo rllib-ppo: RLlib in its own virtual environment (ray[rllib] pins gymnasium 1.2.2);
 see `uav-formation train --algo rllib-ppo --help`."""
 

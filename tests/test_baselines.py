@@ -268,6 +268,25 @@ def test_sac_smoke_run(tmp_path, scenario_yaml):
     assert policy.act_batch(obs).shape == (1, 3, 3)
 
 
+def test_a_velocity_mode_run_flies_through_its_set_point_loop(tmp_path, scenario_yaml):
+    from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
+
+    code = train_main(
+        [
+            "--algo", "ppo", "--timesteps", "192", "--out", str(tmp_path), "--copies", "2",
+            "--scenario", str(scenario_yaml), "--no-progress",
+            "--set", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=0",
+            "episode.reward=train", "episode.action=velocity", "episode.velocity_range=7.5",
+        ]
+    )  # fmt: skip
+    assert code == 0
+    trained = resolve_scenario(tmp_path / "scenario.yaml")
+    assert trained.episode.action == "velocity" and trained.episode.reward == "train"
+    policy = make_policy(str(tmp_path), run_scenario(tmp_path))
+    assert isinstance(policy, VelocitySetpointPolicy)
+    assert policy.velocity_range == 7.5
+
+
 # ------------------------------------------------------------------------- shipped models
 @pytest.mark.parametrize("name", sorted(SHIPPED_MODELS))
 def test_shipped_models_fly_their_scenario(name):
