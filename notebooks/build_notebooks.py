@@ -108,15 +108,18 @@ print("paper's events [s]:", PAPER_EVENTS_S)"""
 RL_VS_REFERENCE = [
     new_markdown_cell(
         "# 02 · Learned baselines against the reference policy: cost *and* mission\n\n"
-        "The shipped model of the paper task (`paper_dagger`, installed with the package; one "
-        "policy shared by every UAV): the mean of three MLPs cloned by DAgger from the exact "
-        "best-response DMPC (`python -m uav_formation_baselines.train_ensemble`). It flies the same seeds through the "
+        "The shipped model of the paper task (`paper_ppo`, installed with the package; one "
+        "policy shared by every UAV): PPO trained from the bounded training reward alone, no "
+        "teacher (`python -m uav_formation_baselines.onpolicy --algo ppo --task track,paper`, "
+        "docs/training.md). It flies the same seeds through the "
         "same code as the LFPIO distributed-MPC reference, PIO, the consensus heuristic and "
         "random actions: `uav_formation_env.evaluation.make_policy`, `run_episodes` and "
         "`summarise`, which is what `uav-formation evaluate` and "
         "`python -m uav_formation_baselines.evaluate` run. Each model flies the scenario of its "
-        "run directory (`scenario.yaml`: the DAgger model reads the N-independent local "
-        "observation); the physics, the seeds and so the episodes' scenes are the paper's.\n\n"
+        "run directory (`scenario.yaml`: the PPO model reads the route offset of its slot and "
+        "commands velocity set-points, flown through its set-point loop under the evaluation's "
+        "rules, `tasks.evaluation_scenario`); the physics, the seeds and so the episodes' "
+        "scenes are the paper's.\n\n"
         "The paper's game cost J_i tracks the preset **velocity**, not a position, so a low "
         "cost does not mean the mission was flown. The table puts the realised cost beside the "
         'mission metrics of `summarise(batch)["mission"]`: missions completed, route error of '
@@ -138,6 +141,7 @@ from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import make_policy, preset_route, run_episodes, summarise
 from uav_formation_env.plotting import draw_obstacles
 from uav_formation_env.policies.registry import model_scenario  # a shipped model's scenario
+from uav_formation_env.tasks import evaluation_scenario
 
 seeds = list(range(2)) if SMALL else list(range(20))
 
@@ -149,7 +153,8 @@ def short(scenario):
 scenario = short(resolve_scenario("paper"))
 policies = {}  # label -> (policy name or model path, the scenario it flies)
 # a model flies the scenario (observation layout) it was trained on
-policies["DAgger"] = ("paper_dagger", short(resolve_scenario(model_scenario("paper_dagger"))))
+trained = evaluation_scenario(resolve_scenario(model_scenario("paper_ppo")))
+policies["PPO"] = ("paper_ppo", short(trained))
 for name in ("lfpio", "pio", "heuristic", "random"):
     policies[name] = (name, scenario)
 print({label: name for label, (name, _) in policies.items()})"""

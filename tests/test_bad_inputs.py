@@ -255,7 +255,7 @@ TABLE: list[tuple[str, Callable[[], object], type[BaseException], str]] = [
     ),
     (
         "model of another number of UAVs",
-        lambda: make_policy("paper_dagger", resolve_scenario("n3")),
+        lambda: make_policy("random_fields_dagger", resolve_scenario("n3")),
         ValueError,
         r"reads local observations of 95 values, but scenario 'n3_paper' \(3 UAVs\) gives full observations of 33",
     ),

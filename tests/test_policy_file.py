@@ -159,7 +159,6 @@ def test_a_plain_mlp_exports_its_first_three_outputs(tmp_path: Path) -> None:
 # ------------------------------------------------------------------------- shipped models
 def test_shipped_models_are_named_in_the_help() -> None:
     assert sorted(SHIPPED_MODELS) == [
-        "paper_dagger",
         "paper_ppo",
         "random_fields_dagger",
         "random_swarm_dagger",
@@ -193,10 +192,10 @@ def test_shipped_models_load_with_deprecations_as_errors() -> None:
 
 
 def test_shipped_model_by_name_flies_its_own_scenario() -> None:
-    scenario = load_scenario(MODELS_DIR / "paper_dagger" / "scenario.yaml")
-    policy = make_policy("paper_dagger", scenario)
+    scenario = load_scenario(MODELS_DIR / "random_fields_dagger" / "scenario.yaml")
+    policy = make_policy("random_fields_dagger", scenario)
     with pytest.raises(ValueError, match="reads local observations of 95 values"):
-        make_policy("paper_dagger", resolve_scenario("paper"))  # the full layout
+        make_policy("random_fields_dagger", resolve_scenario("random_fields"))  # full layout
     assert policy.observation_size == 95
 
 

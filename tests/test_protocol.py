@@ -53,9 +53,9 @@ def test_the_runner_flies_a_bare_policy_and_resets_a_seeded_one() -> None:
 
 def test_every_policy_of_the_package_declares_the_protocol() -> None:
     paper = resolve_scenario("paper")
-    student = load_scenario(MODELS_DIR / "paper_dagger" / "scenario.yaml")
+    student = load_scenario(MODELS_DIR / "random_fields_dagger" / "scenario.yaml")
     for name, scenario in (("lfpio", paper), ("heuristic", paper), ("random", paper)):
         policy = make_policy(name, scenario)
         assert isinstance(policy, PolicyBase) and as_batch_policy(policy) is policy
-    assert isinstance(make_policy("paper_dagger", student), PolicyBase)
+    assert isinstance(make_policy("random_fields_dagger", student), PolicyBase)
     assert "hasattr" not in inspect.getsource(runner)

@@ -59,7 +59,6 @@ POLICY_NAMES = (*DMPC_OPTIMIZERS, *SIMPLE_POLICIES)
 MODELS_DIR = Path(__file__).resolve().parents[1] / "models"  # installed as package data
 # name -> what the model is; each directory holds policy.json, policy.npz, scenario.yaml
 SHIPPED_MODELS = {
-    "paper_dagger": "DAgger students of the exact DMPC on the paper scenario",
     "random_fields_dagger": "DAgger students on random obstacle fields (random_fields)",
     "random_swarm_dagger": "DAgger students on random swarms of 3-10 UAVs (random_swarm)",
     "paper_ppo": "PPO from the training reward alone (curriculum track, paper) on the paper",
