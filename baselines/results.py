@@ -63,6 +63,30 @@ def run_record(run: str | Path) -> dict[str, Any]:
     return {**config, "algorithm": str(algorithm), "agent_steps": steps}
 
 
+def configuration_label(record: dict[str, Any]) -> str:
+    """The row a run belongs to: its algorithm, then the scenario overrides it trained with
+    (``hyperparams.env`` of the in-process trainer, as dotted keys) and the model it started
+    from (``init``), so that runs differing only in their seed share a row."""
+    label = record["algorithm"]
+    env = (record.get("hyperparams") or {}).get("env") or {}
+    settings = [f"{key}={value}" for key, value in _dotted(env)]
+    if settings:
+        label += f" ({', '.join(settings)})"
+    if record.get("init"):
+        label += f" from {Path(str(record['init'])).name}"
+    return label
+
+
+def _dotted(mapping: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:
+    items: list[tuple[str, Any]] = []
+    for key, value in mapping.items():
+        if isinstance(value, dict):
+            items += _dotted(value, f"{prefix}{key}.")
+        else:
+            items.append((f"{prefix}{key}", value))
+    return items
+
+
 def _row(
     label: str,
     per_run: list[dict[str, Any]],
@@ -228,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.observation is not None:
             flown = scenario
         summary = evaluate_policy_name(str(model_path(run)), flown, seeds)
-        grouped.setdefault(record["algorithm"], []).append((record, summary))
+        grouped.setdefault(configuration_label(record), []).append((record, summary))
         summaries[str(run)] = summary
         print(f"{run}: {summary['mission']['completed']}/{len(seeds)} completed", file=sys.stderr)
     references = {name: evaluate_policy_name(name, scenario, seeds) for name in args.compare}

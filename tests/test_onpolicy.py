@@ -324,3 +324,19 @@ def test_curriculum_moves_up_after_a_completed_evaluation(tmp_path: Path) -> Non
     assert not trainer.promote()  # the last task
     with pytest.raises(ValueError, match="one observation size"):
         OnPolicyTrainer("ppo", hold, config, 0, 1, tmp_path, ladder=[build_scenario("n3", config)])
+
+
+def test_results_rows_are_configurations_not_seeds():
+    from uav_formation_baselines.results import configuration_label
+
+    plain = {"algorithm": "ppo", "hyperparams": {"env": {}}, "init": ""}
+    assert configuration_label(plain) == "ppo"
+    variant = {
+        "algorithm": "ppo",
+        "hyperparams": {"env": {"episode": {"train": {"separation": 0.3, "route": 0}}}},
+        "init": "/runs/random_fields_dagger_m0",
+    }
+    assert configuration_label(variant) == (
+        "ppo (episode.train.separation=0.3, episode.train.route=0) from random_fields_dagger_m0"
+    )
+    assert configuration_label({"algorithm": "mappo"}) == "mappo"  # other recipes' configs
