@@ -3,7 +3,7 @@ episode layer in-process: PPO with parameter sharing, MAPPO (centralised critic)
 
     python -m uav_formation_baselines.onpolicy --algo ppo --task paper --seed 0 --frames 2e6 \
         --copies 256 --out runs/ppo_paper [--device cpu|cuda] [--eval-every 10] [--eval-seeds 8] \
-        [--set key=value ...] [--init DIR [--init-reg COEF]] [--resume]
+        [--set key=value ...] [--init DIR [--init-member K] [--init-reg COEF]] [--resume]
 
 Frames are agent-steps: one control step of B copies of N UAVs is B N frames. The reward is
 ``step.reward`` of :class:`~uav_formation_env.episode.FormationEpisodes` as the scenario defines
@@ -77,6 +77,12 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
     )  # fmt: skip
     parser.add_argument("--init-reg", type=float, default=None, help="L2 pull to the --init actor")
     parser.add_argument(
+        "--init-member",
+        type=integer_at_least(0),
+        default=None,
+        help="the network of an ensemble --init (a shipped DAgger student) to start from",
+    )
+    parser.add_argument(
         "--set", dest="overrides", action="extend", nargs="+", default=[], metavar="KEY=VALUE",
         help="hyper-parameter override (YAML value); env.<scenario key>=... overrides the task",
     )  # fmt: skip
@@ -133,6 +139,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
             args.backend,
             args.resume,
             ladder,
+            args.init_member,
         )
     except ValueError as error:
         print(f"uav-formation: error: {error}", file=sys.stderr)

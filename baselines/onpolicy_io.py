@@ -61,8 +61,12 @@ def export_policy(
     atomic_write(directory / "policy.json", lambda p: p.write_text(json.dumps(header, indent=2)))
 
 
-def read_policy(directory: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """The header and arrays of a policy directory; ``ValueError`` naming what is wrong."""
+def read_policy(
+    directory: Path, member: int | None = None
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """The header and arrays of a policy directory, as one network: the file's only one, or
+    network ``member`` of an ensemble (``m{member}.*`` read as ``m0.*``); ``ValueError``
+    naming what is wrong."""
     try:
         header = json.loads((directory / "policy.json").read_text(encoding="utf-8"))
         with np.load(directory / "policy.npz", allow_pickle=False) as data:
@@ -71,8 +75,24 @@ def read_policy(directory: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]
         raise ValueError(f"--init: cannot read a policy from {str(directory)!r}: {error}") from None
     if header.get("format") != POLICY_FORMAT or header.get("version") != 1:
         raise ValueError(f"--init: {directory} is not a {POLICY_FORMAT} v1 directory")
-    if header.get("members", 1) != 1:
-        raise ValueError(f"--init: {directory} averages {header['members']} networks; expected 1")
+    members = header.get("members", 1)
+    if member is not None:
+        if not 0 <= member < members:
+            raise ValueError(
+                f"--init-member: {directory} has networks 0..{members - 1}, got {member}"
+            )
+        prefix = f"m{member}."  # its layers as network 0; the statistics are shared
+        arrays = {
+            ("m0." + key[len(prefix) :] if key.startswith(prefix) else key): value
+            for key, value in arrays.items()
+            if key.startswith(prefix) or not key.startswith("m")
+        }
+        header = {**header, "members": 1}
+    elif members != 1:
+        raise ValueError(
+            f"--init: {directory} averages {members} networks; start from one of them with "
+            f"--init-member K (0..{members - 1})"
+        )
     if header.get("action") != "clip":
         raise ValueError(f"--init: {directory} has action {header.get('action')!r}; expected clip")
     return header, arrays

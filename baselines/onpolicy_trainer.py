@@ -96,7 +96,6 @@ def build_scenario(task: str | Path | Scenario, config: OnPolicyConfig) -> Scena
     return scenario
 
 
-
 class OnPolicyTrainer:
     """One run: episodes, actor-critic, rollout buffers, updates, evaluations and saves.
 
@@ -119,6 +118,8 @@ class OnPolicyTrainer:
         ladder: the curriculum's next tasks (same observation size as ``scenario``): after an
             evaluation that completes ``config.promote_at`` of its missions the copies move to
             the next one (:meth:`promote`).
+        init_member: with a policy directory of several networks (an ensemble), the one to
+            start from.
     """
 
     def __init__(
@@ -134,6 +135,7 @@ class OnPolicyTrainer:
         backend: str | None = None,
         resume: bool = False,
         ladder: Sequence[Scenario] | None = None,
+        init_member: int | None = None,
     ) -> None:
         if algo not in ONPOLICY_ALGOS:
             raise ValueError(f"algo must be one of {ONPOLICY_ALGOS}, got {algo!r}")
@@ -152,9 +154,13 @@ class OnPolicyTrainer:
         if config.init_reg > 0 and init is None:
             raise ValueError("init_reg pulls the actor towards its --init weights: give --init")
         self.init = "" if init is None else str(init)
+        self.init_member = init_member
         policy_file = None
+        if init_member is not None and (init is None or (Path(init) / "checkpoint.pt").is_file()):
+            raise ValueError("--init-member picks a network of a policy directory given as --init")
         if init is not None and not (Path(init) / "checkpoint.pt").is_file():
-            policy_file = read_policy(Path(init))  # a policy directory: adopt its architecture
+            # a policy directory: adopt its architecture
+            policy_file = read_policy(Path(init), init_member)
             config = dataclasses.replace(config, **policy_architecture(*policy_file))
         torch.set_num_threads(config.threads)
         torch.manual_seed(seed)
@@ -404,6 +410,7 @@ class OnPolicyTrainer:
         return {
             "algorithm": self.algo,
             "init": self.init,
+            **({} if self.init_member is None else {"init_member": self.init_member}),
             "frames": int(self.frames),
             "wall_time_s": round(self.wall, 2),
             "cpu_time_s": round(self.cpu, 2),

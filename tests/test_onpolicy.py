@@ -24,7 +24,7 @@ from uav_formation_baselines.onpolicy_trainer import (
     gae,
 )
 from uav_formation_env.config_io import load_scenario, resolve_scenario, with_overrides
-from uav_formation_env.policies.policy_file import load_policy_file
+from uav_formation_env.policies.policy_file import load_policy_file, save_policy_file
 
 TINY = {
     "copies": 4,
@@ -340,3 +340,27 @@ def test_results_rows_are_configurations_not_seeds():
         "ppo (episode.train.separation=0.3, episode.train.route=0) from random_fields_dagger_m0"
     )
     assert configuration_label({"algorithm": "mappo"}) == "mappo"  # other recipes' configs
+
+
+def test_init_member_starts_from_one_network_of_an_ensemble(tmp_path: Path):
+    student = Path(__file__).resolve().parents[1] / "baselines" / "models" / "paper_dagger"
+    env = {**TINY["env"], "episode": {"action": "acceleration"}, "observation": {"kind": "local"}}
+    env["observation"]["route_offset"] = False
+    config = load_config("ppo", {**TINY, "env": env})
+    scenario = build_scenario("paper", config)
+    with pytest.raises(ValueError, match="averages 3 networks; start from one of them"):
+        OnPolicyTrainer("ppo", scenario, config, 0, 1, tmp_path / "a", init=student)
+    with pytest.raises(ValueError, match="has networks 0..2, got 3"):
+        OnPolicyTrainer("ppo", scenario, config, 0, 1, tmp_path / "a", init=student, init_member=3)
+    trainer = OnPolicyTrainer(
+        "ppo", scenario, config, 0, 1, tmp_path / "b", init=student, init_member=1
+    )
+    layers, mean, std = load_policy_file(student).parts()[1]
+    save_policy_file(tmp_path / "one", [layers], mean, std, observation="local", activation="tanh")
+    obs = np.asarray(trainer.episodes.observe())
+    np.testing.assert_allclose(
+        TorchActorPolicy(trainer.model).act_batch(obs),
+        load_policy_file(tmp_path / "one").act_batch(obs),
+        atol=1e-5,
+    )
+    assert trainer.metadata()["init_member"] == 1
