@@ -19,7 +19,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from uav_formation_env.config import Scenario
 from uav_formation_env.evaluation import SB3Policy, run_episodes, summarise
+from uav_formation_env.policies.action_modes import in_acceleration_mode
 from uav_formation_env.policies.learned import OBS_STATS_FILE, ObsStats
+from uav_formation_env.tasks import evaluation_scenario
 
 EVAL_KEYS = (
     "realised_cost_mean",
@@ -62,7 +64,9 @@ class FormationEvalCallback(BaseCallback):
     the few evaluation seeds without a collision.)
 
     Args:
-        scenario: the scenario as evaluated (without training-only overrides).
+        scenario: the scenario trained on; evaluation flies it under the evaluation's rules
+            (:func:`uav_formation_env.tasks.evaluation_scenario`), a velocity-mode policy
+            through its set-point loop.
         seeds: one episode per seed, flown as one batch.
         eval_freq: agent-steps between evaluations (> 0).
         out: run directory.
@@ -78,7 +82,8 @@ class FormationEvalCallback(BaseCallback):
         duration: float | None = None,
     ) -> None:
         super().__init__(verbose=0)
-        self.scenario = scenario
+        self.trained = scenario
+        self.scenario = evaluation_scenario(scenario)
         self.seeds = [int(s) for s in seeds]
         self.eval_freq = int(eval_freq)
         self.out = Path(out)
@@ -104,7 +109,9 @@ class FormationEvalCallback(BaseCallback):
 
     def evaluate(self) -> dict[str, Any]:
         """One evaluation now; returns the summary row."""
-        policy = live_policy(self.model)
+        policy = in_acceleration_mode(
+            live_policy(self.model), self.trained.episode, self.scenario.dynamics.u_max
+        )
         summary = summarise(run_episodes(self.scenario, policy, self.seeds, duration=self.duration))
         row: dict[str, Any] = {"timesteps": self.num_timesteps}
         row.update({key: summary[key] for key in EVAL_KEYS})

@@ -149,6 +149,7 @@ def _learn(cls, scen, training, algo_kwargs, out, timesteps, seed, progress, std
     )
     from uav_formation_baselines.wrappers import make_training_env, training_scenario
 
+    trained = training_scenario(scen, training)
     env, base = make_training_env(scen, training, gamma=float(algo_kwargs.get("gamma", 0.99)))
     model = cls(training["policy"], env, seed=seed, device="cpu", verbose=0, **algo_kwargs)
     model.set_logger(_logger(out, stdout_log))
@@ -156,7 +157,11 @@ def _learn(cls, scen, training, algo_kwargs, out, timesteps, seed, progress, std
     if training["eval_freq"]:
         callbacks.append(
             FormationEvalCallback(
-                scen, training["eval_seeds"], training["eval_freq"], out, training["eval_duration"]
+                trained,
+                training["eval_seeds"],
+                training["eval_freq"],
+                out,
+                training["eval_duration"],
             )
         )
     if training["checkpoint_freq"]:
@@ -170,7 +175,7 @@ def _learn(cls, scen, training, algo_kwargs, out, timesteps, seed, progress, std
         interrupted = True  # save the model reached; the run folder is still moved into place
     wall = time.perf_counter() - start
     save_run(model, out)
-    save_scenario(training_scenario(scen, training), out / "scenario.yaml")
+    save_scenario(trained, out / "scenario.yaml")
     model.logger.close()  # its files are complete before the folder moves into place
     env.close()
     return model, base, wall, interrupted

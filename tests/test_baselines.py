@@ -275,13 +275,16 @@ def test_a_velocity_mode_run_flies_through_its_set_point_loop(tmp_path, scenario
         [
             "--algo", "ppo", "--timesteps", "192", "--out", str(tmp_path), "--copies", "2",
             "--scenario", str(scenario_yaml), "--no-progress",
-            "--set", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=0",
+            "--set", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=96",
             "episode.reward=train", "episode.action=velocity", "episode.velocity_range=7.5",
+            "env_overrides.observation.route_offset=true",
         ]
     )  # fmt: skip
-    assert code == 0
+    assert code == 0  # its evaluations fly the observation it trained on, in its action mode
+    assert (tmp_path / "evaluations.csv").read_text().count("\n") == 3  # header + 2 rows
     trained = resolve_scenario(tmp_path / "scenario.yaml")
     assert trained.episode.action == "velocity" and trained.episode.reward == "train"
+    assert trained.observation.route_offset
     policy = make_policy(str(tmp_path), run_scenario(tmp_path))
     assert isinstance(policy, VelocitySetpointPolicy)
     assert policy.velocity_range == 7.5

@@ -18,7 +18,7 @@ from uav_formation_env.config import EpisodeConfig
 from uav_formation_env.core.dynamics import velocity_setpoint_input
 from uav_formation_env.core.observation import VELOCITY_SCALE
 
-__all__ = ["VelocitySetpointPolicy"]
+__all__ = ["VelocitySetpointPolicy", "in_acceleration_mode"]
 
 
 class VelocitySetpointPolicy:
@@ -51,3 +51,17 @@ class VelocitySetpointPolicy:
         if name == "policy":
             raise AttributeError(name)
         return getattr(self.policy, name)
+
+
+def in_acceleration_mode(policy: Any, episode: EpisodeConfig, u_max: float) -> Any:
+    """``policy``, trained under the episode options ``episode``, as an acceleration policy:
+    through :class:`VelocitySetpointPolicy` if it was trained in the velocity mode, else itself.
+
+    Args:
+        policy: anything with ``act_batch``.
+        episode: the episode options it was trained under.
+        u_max: the flown scenario's per-axis input bound [m/s^2].
+    """
+    if episode.action != "velocity":
+        return policy
+    return VelocitySetpointPolicy(policy, episode, u_max)

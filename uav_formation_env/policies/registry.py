@@ -128,11 +128,9 @@ def _in_its_action_mode(
         episode = load_scenario(beside).episode
     else:
         return policy
-    if episode.action != "velocity":
-        return policy
-    from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
+    from uav_formation_env.policies.action_modes import in_acceleration_mode
 
-    return VelocitySetpointPolicy(policy, episode, scenario.dynamics.u_max)
+    return in_acceleration_mode(policy, episode, scenario.dynamics.u_max)
 
 
 def make_policy(
