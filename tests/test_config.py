@@ -560,3 +560,17 @@ def test_large_formations_are_saved_as_edge_lists(tmp_path: Path) -> None:
     stored = yaml.safe_load((tmp_path / f"{large.n_uav}.yaml").read_text())
     edges = stored["formation"]["adjacency"]["edges"]
     assert len(edges) == int(np.asarray(large.formation.adjacency).sum())
+
+
+@pytest.mark.parametrize("n_uav", [100, 900, 1000])
+def test_swarm_obstacles_keep_their_safety_circles_off_the_start_box(n_uav: int) -> None:
+    from uav_formation_env.scenarios import swarm_scenario
+
+    scenario = swarm_scenario(n_uav)  # validated: no cylinder reaches into the start box
+    low, high = scenario.initial.position_low, scenario.initial.position_high
+    for obstacle in scenario.avoidance.obstacles:
+        (x, y), reach = obstacle.center, scenario.avoidance.safety_radius(obstacle)
+        gap = np.hypot(max(low[0] - x, 0.0, x - high[0]), max(low[1] - y, 0.0, y - high[1]))
+        assert gap >= reach - 1e-9
+    # below 1000 the radius is the paper's scaled to the formation's width, as before
+    assert swarm_scenario(900).avoidance.obstacles[0].radius == 108.75

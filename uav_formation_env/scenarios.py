@@ -273,6 +273,14 @@ def random_swarm_scenario() -> Scenario:
 SWARM_SENSING_RADIUS = 25.0  # [m], observation.sensing_radius of swarm_scenario
 
 
+def _box_gap(centre: tuple[float, float], initial: InitialStateConfig) -> float:
+    """Horizontal distance from ``centre`` to the start box of ``initial`` [m] (0 inside)."""
+    low, high = initial.position_low, initial.position_high
+    dx = max(low[0] - centre[0], 0.0, centre[0] - high[0])
+    dy = max(low[1] - centre[1], 0.0, centre[1] - high[1])
+    return math.hypot(dx, dy)
+
+
 def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Scenario:
     """N UAVs in a compact shape on the paper's route and obstacles (module docstring).
 
@@ -285,14 +293,17 @@ def swarm_scenario(n_uav: int, shape: str = "grid", spacing: float = 10.0) -> Sc
     formation = shape_formation(shape, n_uav, spacing)
     across = [row[1] for row in formation.offsets]
     half_width = (max(across) - min(across)) / 2  # [m]
-    # the paper's 30 m obstacles against its V of half-width 40 m, scaled to this formation
-    radius = max(15.0, 30.0 * half_width / 40.0)
+    initial = start_box_for(base.initial, n_uav)
+    # the paper's 30 m obstacles against its V of half-width 40 m, scaled to this formation, with
+    # their safety circles clear of the start box (which grows with N towards O1)
+    clear = min(_box_gap(o.center, initial) for o in PAPER_OBSTACLES)
+    radius = min(max(15.0, 30.0 * half_width / 40.0), clear - base.avoidance.safety_margin)
     obstacles = tuple(ObstacleConfig(o.center, radius) for o in PAPER_OBSTACLES)
     return replace(
         base,
         name=f"swarm_{n_uav}",
         formation=formation,
-        initial=start_box_for(base.initial, n_uav),
+        initial=initial,
         # inside a sub-formation H0's own edges, not the complete graph: with 64 in-neighbours
         # the formation term outweighed the avoidance reference (docs/scenarios.md, swarm_100)
         # not DRAWN_CORNERS: with them swarm_100's grid, faster round O1 and without J_i's
