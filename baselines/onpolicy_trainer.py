@@ -36,6 +36,7 @@ from uav_formation_env.episode import FormationEpisodes, global_state
 from uav_formation_env.evaluation import run_episodes, summarise
 from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
 from uav_formation_env.scenes import n_uav_range
+from uav_formation_env.sim_options import SimOptions
 from uav_formation_env.tasks import evaluation_scenario, training_scenario
 
 TRAIN_SEED_BASE = 1_000_000  # training copies' first seeds: seed * BASE + BASE + b
@@ -471,8 +472,9 @@ class OnPolicyTrainer:
             scenario,
             batch_size=self.config.copies,
             autoreset=True,
-            backend=self.backend,
-            device=self.device if self.backend == "torch" else None,
+            options=SimOptions(
+                backend=self.backend, device=self.device if self.backend == "torch" else None
+            ),
         )
         task = self.curriculum.index(scenario.name)
         return self.episodes.reset(seed=TRAIN_SEED_BASE * (self.seed + 1) + task * 10_000)

@@ -35,6 +35,7 @@ import numpy as np
 
 from uav_formation_env.config_io import resolve_scenario
 from uav_formation_env.episode import FormationEpisodes
+from uav_formation_env.sim_options import SimOptions
 
 
 def episode_rate(
@@ -51,10 +52,7 @@ def episode_rate(
         scenario,
         batch,
         autoreset=True,
-        backend=backend,
-        device=device,
-        compile=compile,
-        noise=noise,
+        options=SimOptions(backend, device, compile, noise),
     )
     episodes.reset(seed=0)
     n = scenario.n_uav
@@ -109,7 +107,7 @@ def dmpc_step_seconds(batch: int, steps: int, backend: str, device=None, random=
     from uav_formation_env.policies.dmpc import NashDMPCPolicy
 
     scenario = paper_scenario()
-    episodes = FormationEpisodes(scenario, batch, backend=backend, device=device)
+    episodes = FormationEpisodes(scenario, batch, options=SimOptions(backend, device))
     policy = NashDMPCPolicy(scenario, "lfpio", random=random)
     seeds = list(range(batch))
     policy.reset(batch, seeds=seeds)

@@ -25,6 +25,7 @@ from uav_formation_env.policies.optimizers import (
     RowStreams,
     minimise,
 )
+from uav_formation_env.sim_options import SimOptions
 
 torch = pytest.importorskip("torch")
 
@@ -118,8 +119,8 @@ def fly(
     random: str = "generator",
 ):
     scenario = paper_scenario()
-    kwargs = {"device": device} if backend == "torch" else {}
-    episodes = FormationEpisodes(scenario, len(seeds), backend=backend, **kwargs)
+    options = SimOptions(backend=backend, device=device if backend == "torch" else None)
+    episodes = FormationEpisodes(scenario, len(seeds), options=options)
     policy = NashDMPCPolicy(scenario, optimizer, random=random)
     policy.reset(len(seeds), seeds=seeds)
     step = episodes.reset(seed=seeds)
@@ -155,7 +156,7 @@ def test_numpy_only_solvers_refuse_tensor_observations() -> None:
     """'exact' is numpy-only: a tensor observation gets a message that
     says so, and the policy still acts on numpy afterwards."""
     scenario = paper_scenario()
-    episodes = FormationEpisodes(scenario, 1, backend="torch")
+    episodes = FormationEpisodes(scenario, 1, options=SimOptions(backend="torch"))
     policy = NashDMPCPolicy(scenario, "exact")
     obs = episodes.reset(seed=[0]).observation
     with pytest.raises(ValueError, match="numpy only"):
@@ -165,8 +166,8 @@ def test_numpy_only_solvers_refuse_tensor_observations() -> None:
 
 
 def test_runner_on_torch_records_the_numpy_episode() -> None:
-    """run_episodes(backend="torch"): the DMPC acts on tensors, the heuristic (numpy-only) gets
-    numpy observations, and both record the numpy run's episode as numpy arrays."""
+    """run_episodes on torch: the DMPC acts on tensors, the heuristic (numpy-only) gets numpy
+    observations, and both record the numpy run's episode as numpy arrays."""
     from uav_formation_env.config_io import with_overrides
     from uav_formation_env.evaluation import make_policy, run_episodes
 
@@ -174,7 +175,7 @@ def test_runner_on_torch_records_the_numpy_episode() -> None:
     for name in ("pio", "heuristic"):
         policy = make_policy(name, scenario)
         numpy_run = run_episodes(scenario, make_policy(name, scenario), [4, 9])
-        torch_run = run_episodes(scenario, policy, [4, 9], backend="torch", device="cpu")
+        torch_run = run_episodes(scenario, policy, [4, 9], options=SimOptions("torch", "cpu"))
         # the DMPC acted on the device (its plans are tensors); the heuristic has no plans
         assert isinstance(getattr(policy, "_plans", None), torch.Tensor) == (name == "pio")
         for field in ("z", "stage_cost", "u_n", "estimate", "obstacle_center"):
@@ -229,8 +230,8 @@ def _fly_lfpio(
 ) -> tuple[list, list, NashDMPCPolicy]:
     """LFPIO over ``steps`` steps of seeds 3 and 8 on ``backend``: its actions and the states
     after each step (copies, in the backend's library) and the policy."""
-    kwargs = {"device": device} if backend == "torch" else {}
-    episodes = FormationEpisodes(scenario, 2, backend=backend, **kwargs)
+    options = SimOptions(backend=backend, device=device if backend == "torch" else None)
+    episodes = FormationEpisodes(scenario, 2, options=options)
     policy = NashDMPCPolicy(scenario, "lfpio")
     policy.reset(2, seeds=[3, 8])
     step = episodes.reset(seed=[3, 8])

@@ -17,6 +17,7 @@ from uav_formation_env.core.array_api import to_numpy
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.scenarios import random_fields_scenario, random_routes_scenario
 from uav_formation_env.sim import FormationSim
+from uav_formation_env.sim_options import SimOptions
 
 torch = pytest.importorskip("torch")
 
@@ -42,7 +43,7 @@ def fly_both(scenario, device: str, steps: int, seeds=(0, 1), reset_at: int | No
     activations seen (the test must exercise the avoidance)."""
     batch = len(seeds)
     reference = FormationSim(scenario, batch_size=batch)
-    candidate = FormationSim(scenario, batch_size=batch, backend="torch", device=device)
+    candidate = FormationSim(scenario, batch, options=SimOptions("torch", device))
     expected, got = reference.reset(seed=list(seeds)), candidate.reset(seed=list(seeds))
     assert_results_equal(expected, got, "reset")
     activations = 0
@@ -82,22 +83,24 @@ def test_drawn_scenes_equal_on_torch(make, device):
 def test_backend_and_device_are_checked():
     scenario = paper_scenario()
     with pytest.raises(ValueError, match="backend must be one of"):
-        FormationSim(scenario, backend="jax")
+        SimOptions(backend="jax")
     with pytest.raises(ValueError, match="runs on device 'cpu' only"):
-        FormationSim(scenario, backend="numpy", device="cuda")
+        SimOptions(backend="numpy", device="cuda")
     with pytest.raises(ValueError, match="device must name a torch device"):
-        FormationSim(scenario, backend="torch", device="moon")
+        SimOptions(backend="torch", device="moon")
+    with pytest.raises(TypeError, match="options must be a SimOptions"):
+        FormationSim(scenario, options="torch")
 
 
 def test_compiled_observer_step_equals_the_eager_one(monkeypatch) -> None:
-    """FormationSim(compile=True): the observer's ticks through torch.compile give the eager
+    """SimOptions(compile=True): the observer's ticks through torch.compile give the eager
     numbers (to rounding); where compilation fails, one warning and the eager loop."""
     from uav_formation_env.core import observer
 
     scenario = paper_scenario()
     runs = []
     for compile_ in (False, True):
-        sim = FormationSim(scenario, batch_size=3, backend="torch", compile=compile_)
+        sim = FormationSim(scenario, 3, options=SimOptions("torch", compile=compile_))
         sim.reset(seed=[1, 2, 3])
         states = [to_numpy(sim.step(torch.full((3, 5, 3), 0.5, dtype=torch.float64)).z).copy()]
         for _ in range(4):
@@ -110,17 +113,17 @@ def test_compiled_observer_step_equals_the_eager_one(monkeypatch) -> None:
         raise RuntimeError("no compiler here")
 
     monkeypatch.setattr(observer, "_COMPILED_HELD", [broken])
-    sim = FormationSim(scenario, batch_size=3, backend="torch", compile=True)
+    sim = FormationSim(scenario, 3, options=SimOptions("torch", compile=True))
     sim.reset(seed=[1, 2, 3])
     with pytest.warns(RuntimeWarning, match="torch.compile of the observer step failed"):
         z = sim.step(torch.full((3, 5, 3), 0.5, dtype=torch.float64)).z
     np.testing.assert_allclose(to_numpy(z), runs[0][0][0], rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match="compile=True needs backend='torch'"):
-        FormationSim(scenario, compile=True)
+        SimOptions(compile=True)
 
 
 def fly_noise(scenario, backend: str, seeds: list, steps: int, noise: str, device="cpu"):
-    sim = FormationSim(scenario, len(seeds), backend=backend, noise=noise, device=device)
+    sim = FormationSim(scenario, len(seeds), options=SimOptions(backend, device, noise=noise))
     first = sim.reset(seed=seeds)
     states, disturbances = [to_numpy(first.z).copy()], []
     u = np.zeros((len(seeds), scenario.n_uav, 3))
@@ -158,11 +161,11 @@ def test_counter_noise_names_the_episode_by_its_seed() -> None:
     for stat in (np.mean, np.std):
         assert stat(np.abs(d_batch)) == pytest.approx(stat(np.abs(d_gen)), rel=0.05)
     with pytest.raises(ValueError, match="noise must be one of"):
-        FormationSim(scenario, noise="philox")
+        SimOptions(noise="philox")
 
 
 def test_counter_noise_is_fresh_uniform_noise_every_step() -> None:
-    sim = FormationSim(paper_scenario(), 2, noise="counter")
+    sim = FormationSim(paper_scenario(), 2, options=SimOptions(noise="counter"))
     sim.reset(seed=[0, 1])
     draws = []
     for _ in range(400):

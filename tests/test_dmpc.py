@@ -244,7 +244,7 @@ def test_j_pre_equals_horizon_cost_on_global_data(mirrored: bool) -> None:
                 neighbours,
                 preview,
                 r.adjacency,
-                sim.offsets,
+                scenario.formation.slot_offsets,
                 cost,
                 dt,
             )

@@ -36,14 +36,14 @@ Table of the episode options (``scenario.episode``; units; all off by default):
 copy after a collision in ``"terminate"`` mode, so that every seed is flown to its end and its
 collisions are counted; training and evaluation apply the same rules unless told otherwise.
 
-Backends: ``backend="torch"`` (and ``device``) runs the simulator and every rule here on torch
+Backends: ``options=SimOptions(backend="torch", device=...)`` runs the simulator and every rule here on torch
 tensors (float32 observations, float64 state), the same code as on numpy; actions may then be
 tensors on that device (docs/architecture.md, "Backends").
 """  # noqa: E501
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import ModuleType
 from typing import Any
 
@@ -75,6 +75,7 @@ from uav_formation_env.core.reference import (
 from uav_formation_env.core.training_reward import reward_terms, training_reward
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.sim import FormationSim, SeedLike, StepResult
+from uav_formation_env.sim_options import SimOptions
 
 __all__ = [
     "EpisodeStep",
@@ -213,7 +214,7 @@ def _encode_layout(sim: FormationSim, result: StepResult) -> tuple[np.ndarray, n
         sim.obstacle_centers,
         sim.obstacle_radii,
         result.min_separation,
-        None if sim.obstacles is None else sim.obstacles.present,
+        sim.obstacles.present,
     )
     return full, None
 
@@ -289,13 +290,9 @@ class FormationEpisodes:
             (evaluation flies every seed to its end and counts the collisions).
         n_uav: N of a scene distribution that draws N per reset (see
             :class:`~uav_formation_env.sim.FormationSim`).
-        backend: ``"numpy"`` or ``"torch"``: the array library of the simulator and of every
-            array an :class:`EpisodeStep` holds.
-        device: the torch device (default CPU).
-        compile: the simulator's observer ticks through ``torch.compile`` (torch only; see
-            :class:`~uav_formation_env.sim.FormationSim`).
-        noise: the simulator's disturbance noise, ``"generator"`` or ``"counter"`` (see
-            :class:`~uav_formation_env.sim.FormationSim`).
+        options: the simulator's :class:`~uav_formation_env.sim_options.SimOptions` (array
+            library, device, compilation, noise source); its backend is also that of every
+            array an :class:`EpisodeStep` holds. None: numpy on the CPU.
     """
 
     def __init__(
@@ -306,21 +303,10 @@ class FormationEpisodes:
         autoreset: bool = False,
         fly_on_after_collision: bool = False,
         n_uav: int | None = None,
-        backend: str = "numpy",
-        device: object = None,
-        compile: bool = False,
-        noise: str = "generator",
+        options: SimOptions | None = None,
     ) -> None:
         self.scenario = scenario
-        self.sim = FormationSim(
-            scenario,
-            batch_size=batch_size,
-            n_uav=n_uav,
-            backend=backend,
-            device=device,
-            compile=compile,
-            noise=noise,
-        )
+        self.sim = FormationSim(scenario, batch_size=batch_size, n_uav=n_uav, options=options)
         self.batch_size = self.sim.batch_size
         self.n_uav = self.sim.n_uav
         self.u_max = scenario.dynamics.u_max
@@ -510,14 +496,8 @@ class FormationEpisodes:
         it. Returns the simulator's :class:`StepResult` after the adoption."""
         if self._flight is None:
             sim = self.sim
-            self._flight = FormationSim(
-                self.scenario,
-                self.batch_size,
-                self.n_uav,
-                sim.backend,
-                sim.device,
-                noise=sim.noise_source,
-            )
+            options = replace(sim.options, compile=False)
+            self._flight = FormationSim(self.scenario, self.batch_size, self.n_uav, options)
             self._flight.adopt(np.ones(self.batch_size, dtype=bool), self.sim)
         flight = self._flight
         pending = starts > 0

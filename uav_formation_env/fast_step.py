@@ -98,10 +98,10 @@ class FastStep:
         self._gains = np.array([c.pi1, c.lambda1, c.pi2, c.lambda2, c.eta, c.rho])
         self._centres = np.ascontiguousarray(obstacle_arrays(cfg.avoidance)[0]).reshape(-1, 2)
         self._r_detect_sq = np.asarray(detection_sq(cfg.avoidance), dtype=float).reshape(-1)
-        self._radii = np.asarray(sim.obstacle_radii, dtype=float)
+        self._radii = np.array([o.radius for o in cfg.avoidance.obstacles], dtype=float)
         self._times, self._velocities = schedule_arrays(cfg.schedule)
-        self._h0 = np.asarray(sim.base_adjacency, dtype=float)
-        self._offsets = np.asarray(sim.offsets, dtype=float)
+        self._h0 = np.asarray(cfg.formation.adjacency, dtype=float)
+        self._offsets = np.asarray(cfg.formation.slot_offsets, dtype=float)
         w = cfg.cost
         self._weights = np.array([
             w.q, w.r, w.n, w.separation, w.separation_distance, w.obstacle, w.obstacle_margin,
@@ -157,7 +157,7 @@ class FastStep:
         if busy:
             sim.topology, out = topology.update_topology(
                 sim.topology, z[..., :3], z[..., 3:], t, sim.scenario.avoidance, sim.schedule,
-                sim.base_adjacency, None, sim.route_start,
+                sim.base_adjacency, sim.obstacles, sim.route_start,
             )  # fmt: skip
             adjacency, reference, avoiding = out.adjacency, out.reference_velocity, out.avoiding
             groups, activated, restored = out.groups, out.activated, out.restored

@@ -51,6 +51,7 @@ __all__ = [
     "SceneConfig",
     "draw_scene",
     "max_gust_std",
+    "max_route_legs",
     "max_obstacles",
     "n_uav_range",
     "route_polyline",
@@ -87,6 +88,15 @@ def max_gust_std(scenario: Scenario) -> float:
     if scene is None or scene.gust_std is None:
         return scenario.disturbance.gust_std
     return float(scene.gust_std[1])
+
+
+def max_route_legs(scenario: Scenario) -> int | None:
+    """The largest leg count of a route drawn per scene (None: every copy flies the template's
+    schedule)."""
+    scene = scenario.scene
+    if scene is None or scene.route is None:
+        return None
+    return scene.route.legs[1]
 
 
 def route_polyline(schedule: ScheduleConfig, start: np.ndarray, duration: float) -> np.ndarray:

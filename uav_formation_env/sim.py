@@ -15,9 +15,10 @@ Order of one control step (docs/model.md §1.4, §3.3, §3.4, §7):
 4. ``t += δ``; topology update at the new positions (adjacency, groups, reference velocity).
 5. Stage cost of J_i at the new state with the applied ``u_n`` (the reward is minus its total).
 
-Backends (docs/architecture.md, "Backends"): ``backend="numpy"`` (default) or ``"torch"`` on any
-device. The state and every array of a :class:`StepResult` live on the backend's device; the core
-functions are the same array-API code on both. Randomness stays on the host: each copy's numpy
+Backends (docs/architecture.md, "Backends"): :class:`~uav_formation_env.sim_options.SimOptions`
+``backend="numpy"`` (default) or ``"torch"`` on any device. The state and every array of a
+:class:`StepResult` live on the backend's device; the core functions are the same array-API code
+on both. Randomness stays on the host: each copy's numpy
 Generator draws its scene, start and noise blocks exactly as on numpy, and the drawn values are
 moved to the device, so a seed names the same episode on both backends. With ``noise="counter"``
 the disturbance noise of step k is instead a counter-based draw
@@ -39,7 +40,6 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.core import counter_rng, topology
 from uav_formation_env.core.array_api import (
     amin,
-    backend_device,
     namespace,
     namespace_of_backend,
     to_numpy,
@@ -60,11 +60,17 @@ from uav_formation_env.core.observer import (
 from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
 from uav_formation_env.core.proximity import SensedPairs, nearest_distance, uav_pairs
 from uav_formation_env.core.reference import CopySchedules, Schedule, blend_offset, copy_schedules
-from uav_formation_env.scenes import max_gust_std, max_obstacles, n_uav_range, scene_of_seed
+from uav_formation_env.scenes import (
+    max_gust_std,
+    max_obstacles,
+    max_route_legs,
+    n_uav_range,
+    scene_of_seed,
+)
 from uav_formation_env.seeding import check_seed
+from uav_formation_env.sim_options import SimOptions
 
 NOISE_BLOCK = 100  # control steps of disturbance noise drawn per Generator call
-NOISE_SOURCES = ("generator", "counter")  # FormationSim(noise=...)
 
 SeedLike = int | Sequence[int] | None
 
@@ -129,10 +135,6 @@ def _host(values, dtype) -> np.ndarray:
 
 def _scene_n_uav(scenario: Scenario, n_uav: int | None) -> int:
     """The N of a simulator of ``scenario`` (see :class:`FormationSim`)."""
-    if scenario.scene is None:
-        if n_uav is not None and n_uav != scenario.n_uav:
-            raise ValueError(f"n_uav={n_uav!r} differs from the scenario's {scenario.n_uav} UAVs")
-        return scenario.n_uav
     low, high = n_uav_range(scenario)
     if n_uav is None:
         if low != high:
@@ -142,7 +144,8 @@ def _scene_n_uav(scenario: Scenario, n_uav: int | None) -> int:
             )
         return low
     if not isinstance(n_uav, int | np.integer) or not low <= n_uav <= high:
-        raise ValueError(f"n_uav must be an integer in {low}..{high}, got {n_uav!r}")
+        span = f"{low}" if low == high else f"in {low}..{high}"
+        raise ValueError(f"n_uav must be an integer {span} (the scenario's N), got {n_uav!r}")
     return int(n_uav)
 
 
@@ -160,15 +163,8 @@ class FormationSim:
         batch_size: number of copies B.
         n_uav: N of a distribution that draws N per reset (every copy of a simulator has the same
             N; a reset whose seed draws another N raises ValueError and changes nothing).
-        backend: array library of the state, ``"numpy"`` or ``"torch"`` (float64 on both).
-        device: where a torch state lives (``"cpu"``, ``"cuda"``, ...; default CPU); numpy: "cpu".
-        compile: run the observer's inner ticks through ``torch.compile`` (torch only; the first
-            step compiles; falls back to the eager loop with a warning where compilation is not
-            available; :func:`~uav_formation_env.core.observer.compiled_observer_step_held`).
-        noise: the disturbance noise, ``"generator"`` (blocks from each copy's numpy generator,
-            moved to the device: the paper reproduction's numbers) or ``"counter"`` (counter-based
-            draws on the device, keyed by each copy's seed and counted by its step; a seed names
-            the same scene and start either way, not the same noise).
+        options: the array library, device, compilation and noise source
+            (:class:`~uav_formation_env.sim_options.SimOptions`; None: numpy on the CPU).
     """
 
     def __init__(
@@ -176,23 +172,20 @@ class FormationSim:
         scenario: Scenario,
         batch_size: int = 1,
         n_uav: int | None = None,
-        backend: str = "numpy",
-        device: object = None,
-        compile: bool = False,
-        noise: str = "generator",
+        options: SimOptions | None = None,
     ) -> None:
         if not isinstance(batch_size, int | np.integer) or batch_size < 1:
             raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
-        if noise not in NOISE_SOURCES:
-            raise ValueError(f"noise must be one of {NOISE_SOURCES}, got {noise!r}")
-        self.noise_source = noise
-        if compile and backend != "torch":
-            raise ValueError(f"compile=True needs backend='torch' (got backend={backend!r})")
+        options = SimOptions() if options is None else options
+        if not isinstance(options, SimOptions):
+            raise TypeError(f"options must be a SimOptions, got {type(options).__name__}")
+        self.options = options
+        self.noise_source = options.noise
         # the observer's S ticks, the bulk of a step's arithmetic, through torch.compile
-        self._observer_held = compiled_observer_step_held if compile else observer_step_held
-        namespace_of_backend(backend)  # checks the name (and that torch imports)
-        self.backend = backend
-        self.device = backend_device(backend, device)
+        held = compiled_observer_step_held if options.compile else observer_step_held
+        self._observer_held = held
+        self.backend = options.backend
+        self.device = options.resolved_device()
         self.scenario = scenario
         self.batch_size = int(batch_size)
         self.n_uav = _scene_n_uav(scenario, n_uav)
@@ -200,32 +193,22 @@ class FormationSim:
         self.u_max = scenario.dynamics.u_max
         B, N = self.batch_size, self.n_uav
         self.scenes: list[Scenario] = [scenario] * B  # the concrete scenario of each copy
-        disturbance = scenario.disturbance
-        if scenario.scene is None:
-            self.offsets = scenario.formation.slot_offsets  # (N, 6)
-            self.base_adjacency = np.asarray(scenario.formation.adjacency, dtype=float)  # (N, N)
-            self.obstacles: ObstacleField | None = None  # the scenario's, in every copy
-            self.copy_disturbance: CopyDisturbance | None = None
-            self.obstacle_centers = np.array(
-                [o.center for o in scenario.avoidance.obstacles], dtype=float
-            ).reshape(-1, 2)
-            self.obstacle_radii = np.array([o.radius for o in scenario.avoidance.obstacles])
-        else:
-            self.offsets = np.zeros((B, N, 6))
-            self.base_adjacency = np.zeros((B, N, N))
-            avoidance = replace(scenario.avoidance, obstacles=())
-            self.obstacles = obstacle_field([avoidance] * B, max_obstacles(scenario))
-            self.obstacle_centers = self.obstacles.centres  # (B, O, 2), padding far away
-            self.obstacle_radii = self.obstacles.radii  # (B, O)
-            # the noise layout has gust columns whenever some draw may have gusts
-            disturbance = replace(disturbance, gust_std=max_gust_std(scenario))
-            self.copy_disturbance = CopyDisturbance.of(disturbance, B)
+        # every copy's scene as per-copy arrays, written at reset (a fixed scenario is a scene
+        # distribution of one point)
+        self.offsets = np.zeros((B, N, 6))  # slot offsets of each copy [m, m/s]
+        self.base_adjacency = np.zeros((B, N, N))  # H0 of each copy
+        empty = replace(scenario.avoidance, obstacles=())
+        self.obstacles: ObstacleField = obstacle_field([empty] * B, max_obstacles(scenario))
+        # the noise layout has gust columns whenever some draw may have gusts
+        disturbance = replace(scenario.disturbance, gust_std=max_gust_std(scenario))
+        self.copy_disturbance = CopyDisturbance.of(disturbance, B)
+        self._written: list[Scenario | None] = [None] * B  # the scene in each copy's arrays
         self.disturbance = Disturbance(disturbance, N, self.dt)
         # the preset schedule: the scenario's, or one drawn per copy (scene.route)
         self.schedule: Schedule = scenario.schedule
-        if scenario.scene is not None and scenario.scene.route is not None:
-            self.schedule = copy_schedules([scenario.schedule] * B, scenario.scene.route.legs[1])
-        self._shared_field: ObstacleField | None = None  # built on first use of `field`
+        legs = max_route_legs(scenario)
+        if legs is not None:
+            self.schedule = copy_schedules([scenario.schedule] * B, legs)
         self._rows = np.arange(self.batch_size)
         self._n_steps = scenario.n_steps
         # The state of every copy, declared here and (re)initialised per copy by reset().
@@ -245,8 +228,8 @@ class FormationSim:
         self.last: StepResult | None = None  # None until the first reset
         # the states of the last step's result and their pair distances (see pair_distances_of)
         self._pair_of: tuple[np.ndarray | None, np.ndarray | SensedPairs] = (None, np.zeros(0))
-        if backend != "numpy":  # everything the step reads, on the device
-            for name in ("offsets", "base_adjacency", "obstacle_centers", "obstacle_radii"):
+        if self.backend != "numpy":  # everything the step reads, on the device
+            for name in ("offsets", "base_adjacency"):
                 setattr(self, name, self._put(getattr(self, name)))
             for name in ("z", "gust", "t", "route_start", "steps", "noise_keys"):
                 setattr(self, name, self._put(getattr(self, name)))
@@ -335,7 +318,7 @@ class FormationSim:
                 centre = (low + high) / 2
                 z[row, :, :3] = formation_positions(rng, slots, centre, initial.formation_jitter)
             z[row, :, 3:] = initial.velocity
-            if cfg.scene is not None:
+            if self._written[b] is not scene:
                 self._set_scene(b, scene)
             gust[row] = self.disturbance.initial_gust(rng, scene.disturbance.gust_std)
             if self.noise_source == "counter":
@@ -374,11 +357,11 @@ class FormationSim:
         """Write a drawn scene into copy ``copy``'s per-copy arrays."""
         self.offsets[copy] = self._put(scene.formation.slot_offsets)
         self.base_adjacency[copy] = self._put(np.asarray(scene.formation.adjacency, dtype=float))
-        assert self.obstacles is not None and self.copy_disturbance is not None
         self.obstacles.set_copy(copy, scene.avoidance)
         self.copy_disturbance.set_copy(copy, scene.disturbance)
         if isinstance(self.schedule, CopySchedules):
             self.schedule.set_copy(copy, scene.schedule)
+        self._written[copy] = scene
 
     # ------------------------------------------------------------------ step
     def step(self, u_n: np.ndarray) -> StepResult:
@@ -567,18 +550,16 @@ class FormationSim:
         on = self._put(mask)
         for name in ("z", "gust", "t", "steps", "route_start", "noise_keys"):
             getattr(self, name)[on] = getattr(source, name)[on]
-        if self.scenario.scene is not None:
-            assert self.obstacles is not None and source.obstacles is not None
-            self.offsets[on] = source.offsets[on]
-            self.base_adjacency[on] = source.base_adjacency[on]
-            self.obstacles.take(on, source.obstacles)
-            if isinstance(self.schedule, CopySchedules):
-                assert isinstance(source.schedule, CopySchedules)
-                self.schedule.times[on] = source.schedule.times[on]
-                self.schedule.velocities[on] = source.schedule.velocities[on]
-            ours, theirs = self.copy_disturbance, source.copy_disturbance
-            for name in ("amplitude", "wind", "gust_std"):
-                getattr(ours, name)[on] = getattr(theirs, name)[on]
+        self.offsets[on] = source.offsets[on]
+        self.base_adjacency[on] = source.base_adjacency[on]
+        self.obstacles.take(on, source.obstacles)
+        if isinstance(self.schedule, CopySchedules):
+            assert isinstance(source.schedule, CopySchedules)
+            self.schedule.times[on] = source.schedule.times[on]
+            self.schedule.velocities[on] = source.schedule.velocities[on]
+        ours, theirs = self.copy_disturbance, source.copy_disturbance
+        for name in ("amplitude", "wind", "gust_std"):
+            getattr(ours, name)[on] = getattr(theirs, name)[on]
         self.observer = _where_batch(on, source.observer, self.observer)
         self.topology = _where_batch(on, source.topology, self.topology)
         for b in np.flatnonzero(mask):
@@ -586,6 +567,7 @@ class FormationSim:
             self._rngs[b] = copy.deepcopy(source._rngs[b])
             self._seed_streams[b] = copy.deepcopy(source._seed_streams[b])
             self.scenes[b] = source.scenes[b]
+            self._written[b] = source._written[b]
         self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
         self.last = source.last if self.last is None else _where_batch(on, source.last, self.last)
         return self.last
@@ -597,20 +579,18 @@ class FormationSim:
     # ------------------------------------------------------------------ queries
     @property
     def field(self) -> ObstacleField:
-        """Every copy's obstacles as an :class:`ObstacleField` (B, O, ...): the drawn ones of a
-        scene distribution, else the scenario's, as read-only broadcast views of one row."""
-        if self.obstacles is not None:
-            return self.obstacles
-        if self._shared_field is None:
-            row = self._put_fields(obstacle_field([self.scenario.avoidance]))
-            xp = self.xp
-            self._shared_field = ObstacleField(
-                *(
-                    xp.broadcast_to(getattr(row, f), (self.batch_size, *getattr(row, f).shape[1:]))
-                    for f in ("centres", "radii", "r_safe", "r_detect", "present")
-                )
-            )
-        return self._shared_field
+        """Every copy's obstacles (B, O, ...): the arrays the step reads."""
+        return self.obstacles
+
+    @property
+    def obstacle_centers(self):
+        """(B, O, 2) obstacle centres of each copy [m] (padding far away)."""
+        return self.obstacles.centres
+
+    @property
+    def obstacle_radii(self):
+        """(B, O) obstacle radii of each copy [m]."""
+        return self.obstacles.radii
 
     def distances(
         self, pair: np.ndarray | SensedPairs | None = None
@@ -629,11 +609,8 @@ class FormationSim:
         radius = self.scenario.observation.sensing_radius
         if pair is None:
             pair = uav_pairs(p, radius)
-        if self.obstacle_radii.shape[-1] == 0:
+        if self.obstacles.count == 0:
             surface = xp.full(p.shape[:2], xp.inf, dtype=p.dtype, device=self.device)
-        elif self.obstacles is None:
-            centre = topology.obstacle_distances(p, self.scenario.avoidance)
-            surface = amin(centre - self.obstacle_radii, axis=-1)
         else:  # padding obstacles are 1e9 m away: never the nearest of a UAV on its route
             centre = topology.obstacle_distances(p, self.obstacles)
             surface = amin(centre - self.obstacles.radii[:, None], axis=-1)

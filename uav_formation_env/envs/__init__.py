@@ -14,6 +14,7 @@ from uav_formation_env.config_io import resolve_with_overrides
 from uav_formation_env.envs.aec import UAVFormationAECEnv
 from uav_formation_env.envs.parallel import UAVFormationParallelEnv
 from uav_formation_env.extras import require
+from uav_formation_env.sim_options import SimOptions
 
 
 def parallel_env(
@@ -107,9 +108,8 @@ def torchrl_env(
     from uav_formation_env.envs.torchrl_adapter import FormationTorchRLEnv
 
     resolved = resolve_with_overrides(scenario, overrides)
-    return FormationTorchRLEnv(
-        resolved, int(num_envs), device, seed, return_state, n_uav, compile=compile, noise=noise
-    )
+    options = SimOptions(backend="torch", device=device, compile=compile, noise=noise)
+    return FormationTorchRLEnv(resolved, int(num_envs), options, seed, return_state, n_uav)
 
 
 __all__ = [

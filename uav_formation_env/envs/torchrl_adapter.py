@@ -37,6 +37,7 @@ from uav_formation_env.episode import (
     observation_bounds,
     observation_size,
 )
+from uav_formation_env.sim_options import SimOptions
 
 __all__ = ["GROUP", "FormationTorchRLEnv"]
 
@@ -50,36 +51,26 @@ class FormationTorchRLEnv(EnvBase):
         scenario: a validated scenario (see :func:`uav_formation_env.envs.torchrl_env`, which
             also takes names and overrides).
         num_envs: B, copies stepped together (the env's batch size).
-        device: torch device of every tensor (``"cpu"``, ``"cuda"``...).
+        options: the simulator's :class:`~uav_formation_env.sim_options.SimOptions`, backend
+            ``"torch"``; its device is that of every tensor (None: torch on the CPU).
         seed: seed of the first reset (None: fresh entropy).
         return_state: add the global state for centralised critics.
         n_uav: N of a scenario that draws N per reset.
-        compile: the observer's ticks through ``torch.compile`` (see
-            :class:`~uav_formation_env.sim.FormationSim`).
-        noise: ``"generator"`` or ``"counter"`` disturbance noise (see
-            :class:`~uav_formation_env.sim.FormationSim`; counter draws stay on the device).
     """
 
     def __init__(
         self,
         scenario: Scenario,
         num_envs: int = 1,
-        device: Any = "cpu",
+        options: SimOptions | None = None,
         seed: int | None = None,
         return_state: bool = True,
         n_uav: int | None = None,
-        compile: bool = False,
-        noise: str = "generator",
     ) -> None:
-        self.episodes = FormationEpisodes(
-            scenario,
-            num_envs,
-            n_uav=n_uav,
-            backend="torch",
-            device=device,
-            compile=compile,
-            noise=noise,
-        )
+        options = SimOptions(backend="torch") if options is None else options
+        if options.backend != "torch":
+            raise ValueError(f"options.backend must be 'torch', got {options.backend!r}")
+        self.episodes = FormationEpisodes(scenario, num_envs, n_uav=n_uav, options=options)
         super().__init__(device=self.episodes.sim.device, batch_size=torch.Size([num_envs]))
         self.scenario = scenario
         self.n_agents = self.episodes.n_uav

@@ -22,6 +22,7 @@ from uav_formation_env.policies.nash import nash_gap as measure_nash_gap
 from uav_formation_env.policies.protocol import BatchPolicy, as_batch_policy
 from uav_formation_env.scenes import seeds_by_n_uav
 from uav_formation_env.seeding import check_seed
+from uav_formation_env.sim_options import SimOptions
 
 
 @dataclass
@@ -129,8 +130,7 @@ def run_episodes(
     desc: str | None = None,
     nash_gap: bool = False,
     n_uav: int | None = None,
-    backend: str = "numpy",
-    device: Any = None,
+    options: SimOptions | None = None,
 ) -> EpisodeBatch:
     """Run one episode per seed, all seeds as one batch, with one ``act_batch`` call per step.
 
@@ -154,12 +154,10 @@ def run_episodes(
             wall time.
         n_uav: N of a scenario that draws N per reset (None: the scenario's one N, or the N
             that all ``seeds`` draw).
-        backend: the array library of the episode layer, ``"numpy"`` or ``"torch"``
-            (:mod:`uav_formation_env.core.array_api`); with torch, a policy whose
-            ``accepts_tensors`` is true (the DMPC metaheuristics, either layout) gets the
-            observations as tensors and acts on the device; any other gets them as numpy
-            arrays. The records are numpy arrays either way.
-        device: the torch device (None: the CPU); numpy runs on the CPU only.
+        options: the simulator's :class:`~uav_formation_env.sim_options.SimOptions` (None:
+            numpy on the CPU); with torch, a policy whose ``accepts_tensors`` is true (the DMPC
+            metaheuristics, either layout) gets the observations as tensors and acts on the
+            device; any other gets them as numpy arrays. The records are numpy arrays either way.
     """
     if duration is not None:
         scenario = with_overrides(scenario, {"duration": float(duration)})
@@ -181,11 +179,10 @@ def run_episodes(
         batch,
         fly_on_after_collision=True,
         n_uav=n_uav,
-        backend=backend,
-        device=device,
+        options=options,
     )
     policy = as_batch_policy(policy)
-    tensors = backend != "numpy" and policy.accepts_tensors
+    tensors = episodes.sim.backend != "numpy" and policy.accepts_tensors
     sim, n_uav = episodes.sim, episodes.n_uav
     policy.reset(batch, seeds=seeds)  # stochastic policies: one stream per episode seed
     start = time.perf_counter()

@@ -15,6 +15,7 @@ from uav_formation_env.policies.registry import (
     POLICY_LABELS,
     make_policy,
 )
+from uav_formation_env.sim_options import SimOptions
 
 OBSERVER_SUFFIX = "_nftsmo"  # a variant flown with the NFTSMO observer on
 # name -> (optimiser, observer on): the paper's optimisers without and with the observer
@@ -98,7 +99,8 @@ def run_variant(
     random: str = "generator",
 ) -> EpisodeBatch:
     """All seeds of one variant as one batch, with the Nash gap of its plans at every step
-    (``array_backend`` and ``device``: those of :func:`~uav_formation_env.evaluation.run_episodes`;
+    (``array_backend`` and ``device``: the :class:`~uav_formation_env.sim_options.SimOptions` of
+    :func:`~uav_formation_env.evaluation.run_episodes`;
     ``random``: that of :func:`~uav_formation_env.evaluation.make_policy`).
     """
     scenario = variant_scenario(base, variant, duration)
@@ -111,6 +113,5 @@ def run_variant(
         progress=progress,
         desc=variant_label(variant),
         nash_gap=True,
-        backend=array_backend,
-        device=device,
+        options=SimOptions(backend=array_backend, device=device),
     )
