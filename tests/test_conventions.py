@@ -309,3 +309,17 @@ def test_no_progress_bars_in_logs(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert "%|" not in done.stderr and "step/s" not in done.stderr, done.stderr[-500:]
     assert "mission completed" in done.stdout
+
+
+def test_module_docstrings_say_what_a_module_is_for_in_at_most_30_lines():
+    """The package is not a lab notebook: a module docstring is a short statement of purpose;
+    reference tables live in docs/."""
+    import ast
+
+    package = Path(__file__).resolve().parents[1] / "uav_formation_env"
+    long = {}
+    for path in sorted(package.rglob("*.py")):
+        doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8")), clean=False)
+        if doc is not None and doc.count("\n") + 1 > 30:
+            long[str(path.relative_to(package))] = doc.count("\n") + 1
+    assert not long, f"module docstrings over 30 lines: {long}"

@@ -18,28 +18,12 @@ formula or an episode rule of its own. It owns:
 - **per-copy autoreset** (``autoreset=True``): a copy whose episode ended is reset at once; its
   last observation is kept as ``final_observation``.
 
-Table of the episode options (``scenario.episode``; units; all off by default):
+The options (``scenario.episode``, all off by default) are tabled in docs/env.md.
 
-| option | default | unit | effect |
-|---|---|---|---|
-| ``reward`` | ``"raw"`` | - | ``"raw"`` -(J_i + p), ``"scaled"`` -(J_i + p) / J_0, ``"log1p"`` -log(1 + (J_i + p) / J_0) |
-| ``reward_scale`` | 1 | - | J_0 |
-| ``max_formation_error`` | 0 (off) | m | truncate a copy with a UAV this far from its slot |
-| ``max_velocity_error`` | 0 (off) | m/s | truncate a copy with a UAV this far from its reference velocity |
-| ``corridor_width`` | 0 (off) | m | terminate a copy whose centroid leaves the corridor around the preset route |
-| ``corridor_penalty`` | 0 | - | cost added to each agent in the step that leaves the corridor |
-| ``start`` | ``"zero"`` | - | ``"random"``: each episode starts at a step drawn in [0, T); ``"staggered"``: the first reset spreads copy b to step b T / B |
-| ``start_controller`` | ``"heuristic"`` | - | the controller that flies a copy from t = 0 to its start step |
-| ``max_cycles`` | 0 (off) | steps | truncate an episode this many steps after its start |
-
-``fly_on_after_collision=True`` (the evaluation runner's rule, a constructor option) keeps flying a
-copy after a collision in ``"terminate"`` mode, so that every seed is flown to its end and its
-collisions are counted; training and evaluation apply the same rules unless told otherwise.
-
-Backends: ``options=SimOptions(backend="torch", device=...)`` runs the simulator and every rule here on torch
-tensors (float32 observations, float64 state), the same code as on numpy; actions may then be
-tensors on that device (docs/architecture.md, "Backends").
-"""  # noqa: E501
+Backends: ``options=SimOptions(backend="torch", device=...)`` runs the simulator and every rule
+here on torch tensors (float32 observations, float64 state), the same code as on numpy; actions
+may then be tensors on that device (docs/architecture.md, "Backends").
+"""
 
 from __future__ import annotations
 

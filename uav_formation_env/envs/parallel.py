@@ -2,74 +2,15 @@
 
 A thin view of the episode layer (:class:`~uav_formation_env.episode.FormationEpisodes`) with one
 scenario copy: it holds no physics, no formula and no episode rule. Agents ``uav_0 … uav_{N-1}``
-(paper: N = 5).
+(paper: N = 5). Each agent acts with a normalised acceleration command ``a ∈ [-1, 1]^3``
+(``u_n = a · u_max``), observes ``19 + 7 (N - 1)`` float32 values (47 for N = 5; the slot table is
+in :mod:`uav_formation_env.core.observation`) and is rewarded with minus the stage cost of its own
+game cost J_i (through ``episode.reward``'s transform). Invalid actions raise ``ValueError``
+naming the agent and leave the environment as it was.
 
-**Action** of each agent: a normalised acceleration command ``a ∈ [-1, 1]^3`` (Box, float32); the
-formation input is ``u_n = a · u_max`` (u_max = 5 m/s² per axis for the paper). Finite actions out
-of range are clipped to [-1, 1]. NaN or infinite values, a wrong shape, a missing or an unknown
-agent raise ``ValueError`` naming the agent, and the environment is left as it was. With the
-observer on, the plant applies ``u = clip(u_n + u_d, ±u_max)`` with ``u_d = -(d̂ + s0)``.
-
-**Observation** of each agent: what UAV i senses or receives, float32, ``19 + 7 (N - 1)`` values
-(47 for N = 5); the slot table is in :mod:`uav_formation_env.core.observation`.
-
-**Reward** of agent i: minus the stage cost of its own game cost J_i at the realised transition,
-
-    -(q Σ_j h_ij ||ε_ij||² + r ||u_n,i||² + n ||v_i - v^d_i||² + s Σ_j max(0, d_s - ||p_i - p_j||)²)
-
-the same function the reference MPC minimises (the separation term is our addition to the paper's
-J_i, see docs/deviations.md). With ``collision.mode == "penalty"``, ``collision.penalty`` is
-subtracted in a step where the agent collides. Summed over an episode it is the paper's
-performance index along the realised trajectory. The reward transform of ``episode.reward``
-applies on top (the raw J_i stays in the info).
-
-**Termination and truncation**: episodes truncate at the scenario's duration (1000 steps for the
-paper). ``collision.mode``: ``"none"`` reports collisions only (default), ``"penalty"`` adds the
-penalty, ``"terminate"`` ends the episode for every agent when any UAV collides (a UAV closer than
-``collision.uav_distance`` to another, or inside an obstacle). With rewards that are always
-negative, ``"terminate"`` makes an early crash attractive to a learner; prefer ``"penalty"``.
-
-**Training options** (scenario fields ``episode.*``, e.g. ``parallel_env("paper",
-episode__reward="log1p", episode__corridor_width=200.0)``; all off by default, the same for
-every view and trainer):
-
-| option | default | unit | effect |
-|---|---|---|---|
-| ``episode.reward`` | ``"raw"`` | - | ``"raw"`` -(J_i + p); ``"scaled"`` -(J_i + p) / J_0; ``"log1p"`` -log(1 + (J_i + p) / J_0) |
-| ``episode.reward_scale`` | 1 | - | J_0 of ``"scaled"`` and ``"log1p"`` |
-| ``episode.max_formation_error`` | 0 (off) | m | truncate when a UAV is this far from its formation slot |
-| ``episode.max_velocity_error`` | 0 (off) | m/s | truncate when a UAV is this far from its reference velocity |
-| ``episode.corridor_width`` | 0 (off) | m | terminate (mission failed) when the centroid leaves the corridor around the preset route |
-| ``episode.corridor_penalty`` | 0 | - | cost added to each agent in the step that leaves the corridor (ending early must not pay) |
-| ``episode.start`` | ``"zero"`` | - | ``"random"``: start at a step drawn in [0, T); ``"staggered"``: copy b of the first reset at step b T / B |
-| ``episode.start_controller`` | ``"heuristic"`` | - | the controller that flies a copy from t = 0 to its start step |
-
-Divergence is a truncation (neither rewarded nor punished); leaving the corridor is a
-termination. Observations are already roughly unit scale; normalisation is left to the
-trainer.
-
-**Info** of agent i (``info_mode="numeric"``, the default: every value a number or a fixed-shape
-array, so that TorchRL, BenchMARL and RLlib can stack them): ``J`` (stage cost, the raw J_i
-whatever the reward transform), ``cost_formation``, ``cost_energy``, ``cost_terminal``,
-``cost_velocity``, ``cost_separation``, ``cost_obstacle`` (its terms), under the training reward
-``reward_velocity``, ``reward_formation``, ``reward_route``, ``reward_energy``,
-``reward_separation``, ``reward_clearance`` (its weighted kernels, docs/training.md), ``neighbours`` (bool mask over
-``possible_agents`` of the agents it receives from this step), ``disturbance`` and ``disturbance_estimate`` (3,) [m/s²],
-``reference_velocity`` (3,) [m/s], ``group`` (sub-formation id), ``obstacle_distance`` (to the
-nearest obstacle surface [m], inf without obstacles), ``min_separation`` (to the nearest other UAV
-[m]), ``collision``, ``position`` (3,) [m], ``velocity`` (3,) [m/s], ``penalty``, ``t`` [s].
-``info_mode="rich"`` gives ``cost_terms`` (a dict of the terms) and ``neighbours`` (a list of
-agent names) instead.
-
-**A distribution over N** (``random_swarm``): the agents of an episode are the first N of
-``possible_agents``; a reset also returns, for each possible agent the episode does not have, a
-zero observation and a zero-valued info (PettingZoo allows extra keys; TorchRL's
-``PettingZooWrapper(..., use_mask=True)`` needs every possible agent at reset), and every
-``neighbours`` mask has the length of ``possible_agents``.
-
-**State** (``state()``): positions / 100 m, velocities / 20 m/s, reference velocities / 20 m/s,
-estimates / 0.5 m/s², t / duration, and the adjacency matrix, flattened (float32).
-"""  # noqa: E501
+docs/env.md is the reference: the reward's formula, termination and truncation, the training
+options, every info key, distributions over N and the global state.
+"""
 
 from __future__ import annotations
 

@@ -23,13 +23,9 @@ barrier is one half-space ``g · u_n >= β`` per UAV:
   (which moves a formation as a whole), and UAV i makes half of that correction (j, seeing i,
   the other half; the usual decentralised split).
 
-**Projection**: where the policy's action meets every barrier it is passed on unchanged;
-elsewhere the shield solves ``min ||x - x_policy||²`` subject to the barriers and the box
-``|u_n| <= u_max - |estimate|`` (the input range the plant leaves while the observer
-compensates, :func:`~uav_formation_env.policies.broadcast.input_half_width`) exactly, by the
-active sets of at most three constraints (tested against scipy's SLSQP), batched over every UAV
-that needs it. Where the barriers cannot all be met inside the box the answer is the box-limited
-compromise of projected gradient ascent on the dual (accelerated).
+**Projection**: actions that meet every barrier pass unchanged; elsewhere the least-squares
+change inside the box ``|u_n| <= u_max - |estimate|`` (exact active sets of at most three
+constraints, tested against scipy's SLSQP; a dual ascent compromise where none is feasible).
 """
 
 from __future__ import annotations

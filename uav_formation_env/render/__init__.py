@@ -24,10 +24,8 @@ grid                      light lines at a world-fixed spacing of 1, 2 or 5 x 10
 ========================  =====================================================================
 
 The view is centred on the swarm and spans ``view_span`` m (wider with ``fit_swarm``).
-
-:func:`render_episode` (module :mod:`~uav_formation_env.render.episode`) flies one episode of a
-policy with the evaluation runner and writes these frames as a GIF, or an MP4 with the
-``[video]`` extra (``uav-formation render``).
+:func:`render_episode` (:mod:`~uav_formation_env.render.episode`) writes an episode's frames as
+a GIF, or an MP4 with the ``[video]`` extra (``uav-formation render``).
 """
 
 from uav_formation_env.render.episode import render_episode
