@@ -3,10 +3,10 @@
 A thin view of the episode layer (:class:`~uav_formation_env.episode.FormationEpisodes`) with one
 scenario copy: it holds no physics, no formula and no episode rule. Agents ``uav_0 … uav_{N-1}``
 (paper: N = 5). Each agent acts with a normalised acceleration command ``a ∈ [-1, 1]^3``
-(``u_n = a · u_max``), observes ``19 + 7 (N - 1)`` float32 values (47 for N = 5; the slot table is
-in :mod:`uav_formation_env.core.observation`) and is rewarded with minus the stage cost of its own
-game cost J_i (through ``episode.reward``'s transform). Invalid actions raise ``ValueError``
-naming the agent and leave the environment as it was.
+(``u_n = a · u_max``), observes ``19 + 7 (N - 1)`` float32 values (47 for N = 5), laid out as
+the slot table of :mod:`uav_formation_env.core.observation`, and is rewarded with minus the
+stage cost of its own game cost J_i (through ``episode.reward``'s transform). Invalid actions
+raise ``ValueError`` naming the agent and leave the environment as it was.
 
 docs/env.md is the reference: the reward's formula, termination and truncation, the training
 options, every info key, distributions over N and the global state.
