@@ -29,6 +29,7 @@ on the device each step (no host loop over copies); numpy and torch draw the sam
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, is_dataclass, replace
 from types import ModuleType
@@ -40,6 +41,7 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.core import counter_rng, topology
 from uav_formation_env.core.array_api import (
     amin,
+    device,
     namespace,
     namespace_of_backend,
     to_numpy,
@@ -147,6 +149,53 @@ def _scene_n_uav(scenario: Scenario, n_uav: int | None) -> int:
         span = f"{low}" if low == high else f"in {low}..{high}"
         raise ValueError(f"n_uav must be an integer {span} (the scenario's N), got {n_uav!r}")
     return int(n_uav)
+
+
+def measured_distances(cfg: Scenario, z, pair, obstacles: ObstacleField) -> tuple:
+    """Nearest-UAV distance and nearest obstacle-surface distance of the states ``z``, each
+    (B, N) [m] (see :meth:`FormationSim.distances`)."""
+    p = z[..., :3]
+    if obstacles.count == 0:
+        surface = namespace(p).full(p.shape[:2], math.inf, dtype=p.dtype, device=device(p))
+    else:  # padding obstacles are 1e9 m away: never the nearest of a UAV on its route
+        centre = topology.obstacle_distances(p, obstacles)
+        surface = amin(centre - obstacles.radii[:, None], axis=-1)
+    return nearest_distance(pair, cfg.observation.sensing_radius), surface
+
+
+def measure_state(
+    cfg: Scenario,
+    z,
+    observer: ObserverState,
+    u_n,
+    out: topology.TopologyOutput,
+    offsets,
+    obstacles: ObstacleField,
+) -> tuple:
+    """What the states ``z`` (B, N, 6) measure after the topology update ``out``: the pair
+    distances, the nearest-UAV and obstacle-surface distances (B, N) [m], the stage cost terms
+    of J_i with the input ``u_n``, the collision flags (B, N) and the observer's estimate
+    (B, N, 3) [m/s^2]."""
+    # one set of pair distances for the separation term, the nearest-UAV distance and the
+    # observation: all pairs, or those within the sensing radius (linear in N)
+    pair = uav_pairs(z[..., :3], cfg.observation.sensing_radius)
+    separation, obstacle_distance = measured_distances(cfg, z, pair, obstacles)
+    cost = stage_cost(
+        z,
+        u_n,
+        out.reference_velocity,
+        out.adjacency,
+        offsets,
+        cfg.cost,
+        pair_distance=pair,
+        obstacle_surface=obstacle_distance,
+    )
+    collision = (separation < cfg.collision.uav_distance) | (obstacle_distance < 0.0)
+    if cfg.observer.enabled:
+        estimate = disturbance_estimate(observer, cfg.observer)
+    else:
+        estimate = namespace(u_n).zeros_like(u_n)
+    return pair, separation, obstacle_distance, cost, collision, estimate
 
 
 class FormationSim:
@@ -472,25 +521,8 @@ class FormationSim:
             if mask is None or mask.all()
             else _where_batch(mask, new_topology, self.topology)
         )
-        # one set of pair distances for the separation term, the nearest-UAV distance and the
-        # observation: all pairs, or those within the sensing radius (linear in N)
-        pair = uav_pairs(self.z[..., :3], cfg.observation.sensing_radius)
-        separation, obstacle_distance = self.distances(pair)
-        cost = stage_cost(
-            self.z,
-            u_n,
-            out.reference_velocity,
-            out.adjacency,
-            self.offsets,
-            cfg.cost,
-            pair_distance=pair,
-            obstacle_surface=obstacle_distance,
-        )
-        collision = (separation < cfg.collision.uav_distance) | (obstacle_distance < 0.0)
-        estimate = (
-            disturbance_estimate(self.observer, cfg.observer)
-            if cfg.observer.enabled
-            else self.xp.zeros_like(d)
+        pair, separation, obstacle_distance, cost, collision, estimate = measure_state(
+            self.scenario, self.z, self.observer, u_n, out, self.offsets, self.obstacles
         )
         z = copy_array(self.z)
         self._pair_of = (z, pair)
@@ -604,17 +636,9 @@ class FormationSim:
             pair: (B, N, N) :func:`~uav_formation_env.core.cost.stage.pair_distances` of the
                 current positions, or their :class:`SensedPairs`, if already computed.
         """
-        p = self.z[..., :3]
-        xp = self.xp
-        radius = self.scenario.observation.sensing_radius
         if pair is None:
-            pair = uav_pairs(p, radius)
-        if self.obstacles.count == 0:
-            surface = xp.full(p.shape[:2], xp.inf, dtype=p.dtype, device=self.device)
-        else:  # padding obstacles are 1e9 m away: never the nearest of a UAV on its route
-            centre = topology.obstacle_distances(p, self.obstacles)
-            surface = amin(centre - self.obstacles.radii[:, None], axis=-1)
-        return nearest_distance(pair, radius), surface
+            pair = uav_pairs(self.z[..., :3], self.scenario.observation.sensing_radius)
+        return measured_distances(self.scenario, self.z, pair, self.obstacles)
 
     def pair_distances_of(self, result: StepResult) -> np.ndarray | SensedPairs:
         """The UAV-UAV distances of ``result.z``: (B, N, N) [m] (+inf on the diagonal), or the
