@@ -33,7 +33,7 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.config_io import resolve_scenario, save_scenario, with_overrides
 from uav_formation_env.core.local_observation import observation_size
 from uav_formation_env.episode import FormationEpisodes, global_state
-from uav_formation_env.evaluation import run_episodes, summarise
+from uav_formation_env.evaluation import run_episode_groups, summarise_groups
 from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
 from uav_formation_env.scenes import n_uav_range
 from uav_formation_env.sim_options import SimOptions
@@ -144,12 +144,14 @@ class OnPolicyTrainer:
         if len(sizes) > 1:
             names = [task.name for task in (scenario, *(ladder or ()))]
             raise ValueError(f"a curriculum needs one observation size; {names} give {sizes}")
-        low, high = n_uav_range(scenario)
-        if algo == "ippo" and low != high:
-            raise ValueError(
-                f"ippo needs a fixed number of UAVs (one network per UAV); scenario "
-                f"{scenario.name!r} draws N in {low}..{high}: use ppo or mappo"
-            )
+        for task in (scenario, *(ladder or ())):
+            low, high = n_uav_range(task)
+            if algo != "ppo" and low != high:
+                why = "one network per UAV" if algo == "ippo" else "a critic on the global state"
+                raise ValueError(
+                    f"{algo} needs a fixed number of UAVs ({why}); scenario {task.name!r} draws "
+                    f"N in {low}..{high}: use ppo (one group of copies per N)"
+                )
         if resume and init is not None:
             raise ValueError("resume continues the run in out; it takes no --init")
         if config.init_reg > 0 and init is None:
@@ -176,9 +178,10 @@ class OnPolicyTrainer:
         self.backend = backend
         self.ladder = [scenario, *(ladder or ())]  # the curriculum's tasks, the current first
         self.curriculum = [task.name for task in self.ladder]
-        self.step = self._start_task(scenario)
-        B, N = config.copies, self.episodes.n_uav
-        T, D = config.rollout_steps, self.step.observation.shape[-1]
+        self.groups: list[dict[str, Any]] = []  # the copies of each N (see _activate)
+        self.group_index = 0
+        self._start_task(scenario)
+        N, D = self.episodes.n_uav, self.step.observation.shape[-1]
         S = int(self.episodes.state().shape[-1])
         self.n_agents, self.obs_dim = N, D
         self.model = ActorCritic(
@@ -205,20 +208,14 @@ class OnPolicyTrainer:
             self.model.parameters(), lr=config.learning_rate, eps=1e-5, fused=True
         )
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
-        zeros = lambda *shape: torch.zeros(shape, device=self.device)  # noqa: E731
-        self.buf_obs, self.buf_act = zeros(T, B, N, D), zeros(T, B, N, 3)
-        self.buf_logp, self.buf_rew, self.buf_val = zeros(T, B, N), zeros(T, B, N), zeros(T, B, N)
-        self.buf_done = zeros(T, B)
-        self.buf_state = zeros(T, B, S) if algo == "mappo" else None
-        self.frames_per_update = T * B * N
-        self.updates = max(1, math.ceil(int(frames) / self.frames_per_update))
+        # round robin over the groups: an update's frames on average
+        per_update = np.mean([group["frames_per_update"] for group in self.groups])
+        self.updates = max(1, math.ceil(int(frames) / per_update))
         self.frames = 0
         self.update_index = 0
         self.wall = 0.0  # training wall time [s], evaluations excluded
         self.cpu = 0.0  # this process's CPU time of the training [s] (a shared machine's wall
         # time grows with the other processes' load; the CPU time does not)
-        self.episode_return = zeros(B, N)
-        self.episode_length = torch.zeros(B, dtype=torch.long, device=self.device)
         # the last 200 finished episodes: mean-over-agents returns and lengths (steps)
         self.finished: deque[float] = deque(maxlen=200)
         self.lengths: deque[int] = deque(maxlen=200)
@@ -226,7 +223,6 @@ class OnPolicyTrainer:
         self.return_scale = (
             RunningNorm(1, math.inf).to(self.device) if config.reward_scaling else None
         )
-        self.discounted = zeros(B, N)
         self.last_eval: dict[str, Any] = {}
         if resume:
             self.optimizer.load_state_dict(saved["optimizer"])
@@ -390,10 +386,10 @@ class OnPolicyTrainer:
             policy = VelocitySetpointPolicy(
                 policy, self.scenario.episode, self.scenario.dynamics.u_max
             )
-        batch = run_episodes(
+        batches = run_episode_groups(
             evaluation_scenario(self.scenario), policy, seeds, policy_name=self.algo
         )
-        summary = summarise(batch)
+        summary = summarise_groups(batches)
         mission = summary["mission"]
         self.last_eval = {
             "task": self.scenario.name,
@@ -465,19 +461,63 @@ class OnPolicyTrainer:
         return state
 
     # ------------------------------------------------------------------ curriculum
-    def _start_task(self, scenario: Scenario) -> Any:
-        """Episodes of ``scenario`` for the copies (a new task of the curriculum), reset."""
+    def _start_task(self, scenario: Scenario) -> None:
+        """The copies of ``scenario`` (a new task of the curriculum), reset: ``config.copies``
+        copies, or as many for each N of a scenario that draws N per reset (one group of copies
+        per N, stepped in turn, an update each); the first group active."""
         self.scenario = scenario
-        self.episodes = FormationEpisodes(
-            scenario,
-            batch_size=self.config.copies,
-            autoreset=True,
-            options=SimOptions(
-                backend=self.backend, device=self.device if self.backend == "torch" else None
-            ),
-        )
         task = self.curriculum.index(scenario.name)
-        return self.episodes.reset(seed=TRAIN_SEED_BASE * (self.seed + 1) + task * 10_000)
+        low, high = n_uav_range(scenario)
+        options = SimOptions(
+            backend=self.backend, device=self.device if self.backend == "torch" else None
+        )
+        self.groups = []
+        for k, n_uav in enumerate(range(low, high + 1)):
+            fixed = {"scene.n_uav": [n_uav, n_uav]}
+            drawn = scenario if low == high else with_overrides(scenario, fixed)
+            episodes = FormationEpisodes(
+                drawn, batch_size=self.config.copies, autoreset=True, options=options
+            )
+            seed = TRAIN_SEED_BASE * (self.seed + 1) + task * 10_000 + k * 1_000
+            self.groups.append(self._group(episodes, episodes.reset(seed=seed)))
+        self.group_index = 0
+        for name, value in self.groups[0].items():
+            setattr(self, name, value)
+
+    def _group(self, episodes: FormationEpisodes, step: Any) -> dict[str, Any]:
+        """A group's state: its episodes and current step, running returns and the rollout
+        buffers (T, B, N, ...) of its N."""
+        T, B, N = self.config.rollout_steps, episodes.batch_size, episodes.n_uav
+        D = step.observation.shape[-1]
+        zeros = lambda *shape: torch.zeros(shape, device=self.device)  # noqa: E731
+        state = int(episodes.state().shape[-1]) if self.algo == "mappo" else 0
+        return {
+            "episodes": episodes,
+            "step": step,
+            "episode_return": zeros(B, N),
+            "episode_length": torch.zeros(B, dtype=torch.long, device=self.device),
+            "discounted": zeros(B, N),
+            "buf_obs": zeros(T, B, N, D),
+            "buf_act": zeros(T, B, N, 3),
+            "buf_logp": zeros(T, B, N),
+            "buf_rew": zeros(T, B, N),
+            "buf_val": zeros(T, B, N),
+            "buf_done": zeros(T, B),
+            "buf_state": zeros(T, B, state) if state else None,
+            "frames_per_update": T * B * N,
+        }
+
+    def _activate(self, index: int) -> None:
+        """Make group ``index`` the one the rollout and update work on: the trainer's
+        ``episodes``, ``step``, running returns and ``buf_*`` are the active group's."""
+        if index == self.group_index:
+            return
+        current = self.groups[self.group_index]
+        for name in current:
+            current[name] = getattr(self, name)
+        for name, value in self.groups[index].items():
+            setattr(self, name, value)
+        self.group_index = index
 
     def promote(self) -> bool:
         """Move to the next task of the curriculum if the last evaluation completed at least
@@ -488,7 +528,7 @@ class OnPolicyTrainer:
         rate = self.last_eval["eval_completed"] / max(1, self.last_eval["eval_episodes"])
         if rate < self.config.promote_at:
             return False
-        self.step = self._start_task(self.ladder[following])
+        self._start_task(self.ladder[following])
         return True
 
     # ------------------------------------------------------------------ loop
@@ -498,7 +538,8 @@ class OnPolicyTrainer:
         from tqdm.auto import tqdm
 
         save_scenario(self.scenario, self.out / "scenario.yaml")
-        total = self.updates * self.frames_per_update
+        per_update = np.mean([group["frames_per_update"] for group in self.groups])
+        total = round(self.updates * per_update)
         bar = tqdm(total=total, initial=self.frames, unit="frame", disable=not progress)
         resumed = self.update_index > 0
         csv_file = open(  # noqa: SIM115
@@ -511,6 +552,7 @@ class OnPolicyTrainer:
         cpu_start = time.process_time() - self.cpu
         try:
             while self.update_index < self.updates:
+                self._activate(self.update_index % len(self.groups))
                 self.rollout()
                 self.update()
                 self.wall = time.perf_counter() - start

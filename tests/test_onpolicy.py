@@ -193,10 +193,35 @@ def test_config_rejects_unknown_keys_and_bad_values():
         build_scenario("paper", OnPolicyConfig(env={"episode": {"rewrd": "raw"}}))
 
 
-def test_ippo_rejects_a_scenario_of_varying_n(tmp_path: Path):
-    config = load_config("ippo", TINY)
-    with pytest.raises(ValueError, match="ippo needs a fixed number of UAVs"):
-        OnPolicyTrainer("ippo", resolve_scenario("random_swarm"), config, 0, 1, tmp_path)
+@pytest.mark.parametrize("algo", ["ippo", "mappo"])
+def test_per_uav_networks_and_the_state_critic_refuse_a_scenario_of_varying_n(
+    tmp_path: Path, algo: str
+):
+    config = load_config(algo, TINY)
+    with pytest.raises(ValueError, match=f"{algo} needs a fixed number of UAVs"):
+        OnPolicyTrainer(algo, resolve_scenario("random_swarm"), config, 0, 1, tmp_path)
+
+
+def test_ppo_trains_a_distribution_over_n_one_group_of_copies_per_n(tmp_path: Path):
+    """random_swarm draws N in 3..10: PPO steps one group of copies per N in turn, an update
+    each, every group's episodes of its own N (each update's frames are T B N of its group)."""
+    scenario = with_overrides(resolve_scenario("random_swarm"), {"scene.n_uav": [3, 5]})
+    config = load_config("ppo", {**TINY, "eval_every": 0})
+    T, B = config.rollout_steps, config.copies
+    frames = T * B * (3 + 4 + 5 + 3)  # four updates: N = 3, 4, 5, then 3 again
+    trainer = OnPolicyTrainer("ppo", scenario, config, 0, frames, tmp_path)
+    assert [group["episodes"].n_uav for group in trainer.groups] == [3, 4, 5]
+    seen = []
+    for update in range(4):
+        trainer._activate(update % len(trainer.groups))
+        trainer.rollout()
+        seen.append(tuple(trainer.buf_obs.shape[:3]))
+        assert all(scene.n_uav == trainer.episodes.n_uav for scene in trainer.episodes.sim.scenes)
+        trainer.update()
+    assert seen == [(T, B, 3), (T, B, 4), (T, B, 5), (T, B, 3)]
+    assert trainer.frames == frames
+    # the paused group goes on from where it stopped, not from a reset
+    assert int(trainer.groups[1]["episodes"].sim.steps.min()) == T
 
 
 def test_torch_backend_steps_the_same_rules(tmp_path: Path):
