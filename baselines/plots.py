@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -222,9 +222,11 @@ def ladder_curves(
     run_dirs: Sequence[str | Path],
     png: str | Path,
     references: dict[str, float] | None = None,
+    label_of: Callable[[dict[str, Any]], str] | None = None,
 ) -> Path:
     """Learning curves of the in-process trainer's runs (``progress.csv`` of
-    ``uav_formation_baselines.onpolicy``), one line per run coloured by algorithm.
+    ``uav_formation_baselines.onpolicy``), one line per run, coloured by ``label_of`` of its
+    ``config.yaml`` (the results table's row; None: the algorithm).
 
     Top: the deterministic evaluation's return per UAV under the training reward over
     agent-steps (left) and over training wall time (right), with ``references`` (name -> the
@@ -239,9 +241,9 @@ def ladder_curves(
     colours: dict[str, Any] = {}
     for run in map(Path, run_dirs):
         config = yaml.safe_load((run / "config.yaml").read_text()) or {}
-        algorithm = str(config.get("algorithm"))
-        label = None if algorithm in colours else algorithm
-        colour = colours.setdefault(algorithm, f"C{len(colours)}")
+        row = label_of(config) if label_of else str(config.get("algorithm"))
+        label = None if row in colours else row
+        colour = colours.setdefault(row, f"C{len(colours) % 10}")
         with open(run / "progress.csv", newline="", encoding="utf-8") as stream:
             rows = [r for r in csv.DictReader(stream) if r.get("eval_return")]
         for column, x_key in enumerate(("frames", "wall_s")):

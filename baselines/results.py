@@ -282,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
         in_process = [r for r in args.runs if "eval_return" in _header(Path(r) / "progress.csv")]
         if in_process:  # the in-process trainer: returns under the training reward
             returns = {name: s["return_mean"] for name, s in references.items()}
-            ladder_curves(in_process, out / "learning_curves.png", returns)
+            ladder_curves(in_process, out / "learning_curves.png", returns, configuration_label)
         else:
             training_curves(args.runs, out / "learning_curves.png", reference_cost=lfpio)
         print(
