@@ -208,9 +208,7 @@ class OnPolicyTrainer:
             self.model.parameters(), lr=config.learning_rate, eps=1e-5, fused=True
         )
         self.generator = torch.Generator(self.device).manual_seed(self.seed)
-        # round robin over the groups: an update's frames on average
-        per_update = np.mean([group["frames_per_update"] for group in self.groups])
-        self.updates = max(1, math.ceil(int(frames) / per_update))
+        self.updates = max(1, math.ceil(int(frames) / self.mean_frames_per_update))
         self.frames = 0
         self.update_index = 0
         self.wall = 0.0  # training wall time [s], evaluations excluded
@@ -507,6 +505,11 @@ class OnPolicyTrainer:
             "frames_per_update": T * B * N,
         }
 
+    @property
+    def mean_frames_per_update(self) -> float:
+        """Agent-steps of an update, on average over the groups (stepped round robin)."""
+        return float(np.mean([group["frames_per_update"] for group in self.groups]))
+
     def _activate(self, index: int) -> None:
         """Make group ``index`` the one the rollout and update work on: the trainer's
         ``episodes``, ``step``, running returns and ``buf_*`` are the active group's."""
@@ -538,8 +541,7 @@ class OnPolicyTrainer:
         from tqdm.auto import tqdm
 
         save_scenario(self.scenario, self.out / "scenario.yaml")
-        per_update = np.mean([group["frames_per_update"] for group in self.groups])
-        total = round(self.updates * per_update)
+        total = round(self.updates * self.mean_frames_per_update)
         bar = tqdm(total=total, initial=self.frames, unit="frame", disable=not progress)
         resumed = self.update_index > 0
         csv_file = open(  # noqa: SIM115
