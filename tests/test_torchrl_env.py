@@ -87,6 +87,12 @@ def test_bad_arguments_are_named():
         envs.torchrl_env("paper", num_envs=0)
     with pytest.raises(ValueError, match="device must name a torch device"):
         envs.torchrl_env("paper", device="moon")
+    from uav_formation_env.config_io import paper_scenario
+    from uav_formation_env.envs.torchrl_adapter import FormationTorchRLEnv
+    from uav_formation_env.sim_options import SimOptions
+
+    with pytest.raises(ValueError, match="options.backend must be 'torch', got 'numpy'"):
+        FormationTorchRLEnv(paper_scenario(), 1, SimOptions())
 
 
 def test_compiled_env_passes_the_spec_check() -> None:
