@@ -29,6 +29,7 @@ import argparse
 import math
 import signal
 import sys
+from pathlib import Path
 
 from uav_formation_baselines.config import parse_set
 from uav_formation_baselines.onpolicy_config import ONPOLICY_ALGOS, load_config
@@ -159,6 +160,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> int:
     )
     reward = float(result.get("eval_return", float("nan")))
     report_run(args.out, args.heldout_seeds, training_reward=reward)
+    best = Path(args.out) / "best"
+    if best.is_dir():  # the policy of the best evaluation on the last task (keep_best)
+        report_run(best, args.heldout_seeds)
     return 0
 
 

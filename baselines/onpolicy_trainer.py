@@ -222,11 +222,14 @@ class OnPolicyTrainer:
             RunningNorm(1, math.inf).to(self.device) if config.reward_scaling else None
         )
         self.last_eval: dict[str, Any] = {}
+        # the best evaluation on the last task: (completed, -collisions, -J) (see keep_best)
+        self.best: list[float] | None = None
         if resume:
             self.optimizer.load_state_dict(saved["optimizer"])
             self.frames, self.update_index = int(saved["frames"]), int(saved["update"])
             self.wall, self.cpu = float(saved["wall_time_s"]), float(saved["cpu_time_s"])
             self.init = str(saved["init"])
+            self.best = saved.get("best")
 
     # ------------------------------------------------------------------ helpers
     def _tensor(self, array: Any, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -424,8 +427,7 @@ class OnPolicyTrainer:
         """Policy files, checkpoint, config.yaml and the current task's scenario.yaml (what
         evaluation flies the policy on), each replaced atomically."""
         meta = self.metadata()
-        export_policy(self.out, self.model, self.scenario, meta)
-        atomic_write(self.out / "scenario.yaml", lambda path: save_scenario(self.scenario, path))
+        self._save_policy(self.out, meta)
         checkpoint = {
             "model": self.model.state_dict(),
             "optimizer": self.optimizer.state_dict(),
@@ -434,13 +436,36 @@ class OnPolicyTrainer:
             "wall_time_s": float(self.wall),
             "cpu_time_s": float(self.cpu),
             "init": self.init,
+            "best": self.best,
         }
         atomic_write(self.out / "checkpoint.pt", lambda path: torch.save(checkpoint, path))
+
+    def _save_policy(self, directory: Path, meta: dict[str, Any]) -> None:
+        """A policy directory: policy files, config.yaml (``meta`` and the hyper-parameters) and
+        the current task's scenario.yaml, each replaced atomically."""
+        directory.mkdir(parents=True, exist_ok=True)
+        export_policy(directory, self.model, self.scenario, meta)
+        atomic_write(directory / "scenario.yaml", lambda path: save_scenario(self.scenario, path))
         config = {**meta, "hyperparams": self.config.as_dict()}
         atomic_write(
-            self.out / "config.yaml",
+            directory / "config.yaml",
             lambda path: path.write_text(yaml.safe_dump(config, sort_keys=False)),
         )
+
+    def keep_best(self) -> bool:
+        """Save the policy to ``out/best`` if its last evaluation, on the curriculum's last task,
+        beats every earlier one there: more missions completed, then fewer collisions, then a
+        lower J. Returns whether it was saved."""
+        last = self.last_eval
+        if not last or self.scenario.name != self.curriculum[-1]:
+            return False
+        key = [last["eval_completed"], -last["eval_collisions"], -last["eval_J"]]
+        if self.best is not None and key <= self.best:
+            return False
+        self.best = key
+        validation = {name: value for name, value in last.items() if name.startswith("eval_")}
+        self._save_policy(self.out / "best", {**self.metadata(), "selected_by": validation})
+        return True
 
     def _load_init(self, directory: Path) -> dict[str, Any]:
         """Load a run directory's ``checkpoint.pt`` into the model (actor, critic and
@@ -573,6 +598,7 @@ class OnPolicyTrainer:
                 every = self.config.eval_every
                 if (every and self.update_index % every == 0) or self.update_index == self.updates:
                     row.update(self.evaluate())
+                    self.keep_best()
                     self.save()
                     self.promote()
                     start = time.perf_counter() - self.wall  # evaluation time is not training

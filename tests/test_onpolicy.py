@@ -351,6 +351,41 @@ def test_curriculum_moves_up_after_a_completed_evaluation(tmp_path: Path) -> Non
         OnPolicyTrainer("ppo", hold, config, 0, 1, tmp_path, ladder=[build_scenario("n3", config)])
 
 
+def test_the_best_evaluation_on_the_last_task_is_kept_as_a_policy(tmp_path: Path) -> None:
+    config = load_config("ppo", {**TINY, "copies": 2, "promote_at": 0.0})
+    hold, track = (build_scenario(t, config) for t in ("hold", "track"))
+    short = [with_overrides(s, {"duration": 20.0}) for s in (hold, track)]
+    trainer = OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+    best = tmp_path / "best"
+
+    def evaluated(completed: int, collisions: int, cost: float) -> bool:
+        trainer.last_eval = {
+            "task": trainer.scenario.name,
+            "eval_completed": completed,
+            "eval_episodes": 2,
+            "eval_collisions": collisions,
+            "eval_J": cost,
+        }
+        return trainer.keep_best()
+
+    assert not evaluated(2, 0, 1.0) and not best.exists()  # not the curriculum's last task
+    assert trainer.promote() and trainer.scenario.name == "track"
+    assert evaluated(1, 3, 5.0)
+    assert not evaluated(1, 4, 1.0)  # fewer completed missions or more collisions lose ...
+    assert not evaluated(0, 0, 1.0)
+    assert not evaluated(1, 3, 5.0)  # ... and a tie keeps the earlier policy
+    assert evaluated(1, 3, 4.0)  # then the lower J wins
+    assert evaluated(2, 9, 9.0)  # completion first
+    header = json.loads((best / "policy.json").read_text())
+    assert header["selected_by"]["eval_completed"] == 2 and header["scenario"] == "track"
+    assert load_scenario(best / "scenario.yaml").name == "track"
+    assert yaml.safe_load((best / "config.yaml").read_text())["algorithm"] == "ppo"
+    load_policy_file(best)  # a policy directory evaluate --policy flies
+    trainer.save()  # a resumed run remembers what it has to beat
+    again = OnPolicyTrainer("ppo", short[1], config, 0, 1, tmp_path, resume=True)
+    assert again.best == [2, -9, -9.0]
+
+
 def test_results_rows_are_configurations_not_seeds():
     from uav_formation_baselines.results import configuration_label
 
