@@ -66,7 +66,8 @@ def run_record(run: str | Path) -> dict[str, Any]:
 def configuration_label(record: dict[str, Any]) -> str:
     """The row a run belongs to: its algorithm, then the scenario overrides it trained with
     (``hyperparams.env`` of the in-process trainer, as dotted keys) and the model it started
-    from (``init``), so that runs differing only in their seed share a row."""
+    from (``init``), so that runs differing only in their seed share a row; a run's best
+    validation policy (``RUN/best``, with ``selected_by``) is a row of its own."""
     label = record["algorithm"]
     env = (record.get("hyperparams") or {}).get("env") or {}
     settings = [f"{key}={value}" for key, value in _dotted(env)]
@@ -74,6 +75,8 @@ def configuration_label(record: dict[str, Any]) -> str:
         label += f" ({', '.join(settings)})"
     if record.get("init"):
         label += f" from {Path(str(record['init'])).name}"
+    if record.get("selected_by"):
+        label += ", best validation"
     return label
 
 

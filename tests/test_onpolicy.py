@@ -400,6 +400,8 @@ def test_results_rows_are_configurations_not_seeds():
         "ppo (episode.train.separation=0.3, episode.train.route=0) from random_fields_dagger_m0"
     )
     assert configuration_label({"algorithm": "mappo"}) == "mappo"  # other recipes' configs
+    best = {**plain, "selected_by": {"eval_completed": 20}}
+    assert configuration_label(best) == "ppo, best validation"
 
 
 def test_init_member_starts_from_one_network_of_an_ensemble(tmp_path: Path):
