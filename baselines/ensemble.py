@@ -4,16 +4,17 @@
         runs/dagger_paperG_s3 runs/dagger_paperG_s4 ... [--top 4]
 
 Each member is a finished run of the same scenario and observation layout (its policy,
-``scenario.yaml`` and ``config.yaml``). ``--top K`` keeps the K members whose chosen rounds scored
-best on their validation seeds (:func:`validation_score`: the 40-seed scores of ``--select 40``
-where the run has them, else training's own; ranked like
-:func:`~uav_formation_baselines.imitation.best_round`), never on evaluation seeds. The mean of
-several students' actions averages out the errors they do not share: on the paper, the clones that
-fail a mission fail different seeds (baselines/RESULTS.md, "Ensembles of GPU-trained students").
+``scenario.yaml`` and ``config.yaml``): a DAgger run, or an on-policy run (PPO, ``RUN`` or its
+``RUN/best``). ``--top K`` keeps the K members that scored best on their validation seeds
+(:func:`validation_score`; ranked like :func:`~uav_formation_baselines.imitation.best_round`),
+never on evaluation seeds. The mean of several policies' actions averages out the errors they do
+not share (baselines/RESULTS.md). Members trained in the velocity action mode average their
+set-points, and the ensemble flies through the same inner loop (its ``scenario.yaml``).
 
 The output directory holds the policy (``policy.json``, ``policy.npz``; load with ``uav-formation
 evaluate --policy DIR``), ``scenario.yaml`` (the members') and ``config.yaml`` (``algorithm:
-dagger_ensemble``, the members with their scores, their summed agent-steps and wall times).
+<members' algorithm>_ensemble``, the members with their scores, their summed agent-steps and wall
+times).
 """
 
 from __future__ import annotations
@@ -42,12 +43,17 @@ __all__ = ["build_ensemble", "rank_runs", "validation_score"]
 
 
 def validation_score(run: str | Path) -> dict[str, Any]:
-    """The validation row of a run's chosen round: ``selection.csv``'s (``--select``) if the run
-    has one, else ``rounds.csv``'s; keys ``round``, ``validation_completed``,
-    ``validation_episodes``, ``validation_cost``, ``source``."""
+    """The validation row of a run; keys ``round``, ``validation_completed``,
+    ``validation_episodes``, ``validation_cost``, ``source``. A DAgger run: its chosen round's,
+    from ``selection.csv`` (``--select``) if it has one, else ``rounds.csv``. An on-policy run:
+    the evaluation its policy was saved at (``selected_by`` of a ``RUN/best``, else the last
+    evaluation in ``progress.csv``; ``round`` is the update)."""
     run = Path(run)
     with open(run / "config.yaml", encoding="utf-8") as stream:
-        chosen = int(yaml.safe_load(stream)["best_round"])
+        record = yaml.safe_load(stream)
+    if "best_round" not in record:
+        return _onpolicy_score(run, record)
+    chosen = int(record["best_round"])
     for name in ("selection.csv", "rounds.csv"):
         if (run / name).is_file():
             with open(run / name, encoding="utf-8") as stream:
@@ -62,6 +68,27 @@ def validation_score(run: str | Path) -> dict[str, Any]:
                 "source": name,
             }
     raise FileNotFoundError(f"{run} has neither selection.csv nor rounds.csv")
+
+
+def _onpolicy_score(run: Path, record: dict[str, Any]) -> dict[str, Any]:
+    """:func:`validation_score` of an on-policy run (uav_formation_baselines.onpolicy)."""
+    source, row = "selected_by", record.get("selected_by")
+    if not row:
+        source, progress = "progress.csv", run / "progress.csv"
+        if not progress.is_file():
+            raise FileNotFoundError(f"{run} has no best_round, selected_by or progress.csv")
+        with open(progress, encoding="utf-8") as stream:
+            rows = [r for r in csv.DictReader(stream) if r.get("eval_completed")]
+        if not rows:
+            raise ValueError(f"{progress} has no evaluation")
+        row = rows[-1]
+    return {
+        "round": int(row.get("update", -1)),
+        "validation_completed": int(row["eval_completed"]),
+        "validation_episodes": int(row["eval_episodes"]),
+        "validation_cost": float(row["eval_J"]),
+        "source": source,
+    }
 
 
 def rank_runs(runs: list[str | Path]) -> list[tuple[Path, dict[str, Any]]]:
@@ -103,6 +130,11 @@ def build_ensemble(
     if any(policy.header["action"] != "clip" for policy in policies):
         raise ValueError("an ensemble averages unsquashed actions: members need action 'clip'")
     members, mean, std = merge_members([part for p in policies for part in p.parts()])
+    records = []
+    for run, _ in ranked:
+        with open(run / "config.yaml", encoding="utf-8") as stream:
+            records.append(yaml.safe_load(stream))
+    algorithm = f"{records[0].get('algorithm', 'policy')}_ensemble"
     out = Path(out)
     save_policy_file(
         out,
@@ -111,7 +143,7 @@ def build_ensemble(
         std,
         observation=scenario.observation.kind,
         activation=activations.pop(),
-        metadata={"scenario": scenario.name, "algorithm": "dagger_ensemble"},
+        metadata={"scenario": scenario.name, "algorithm": algorithm},
     )
     # the file must give the members' mean action on the first observations of episodes 0, 1
     # (of one N: a scene distribution over N, random_swarm, may draw two)
@@ -123,12 +155,8 @@ def build_ensemble(
     if difference > 1e-5:
         raise RuntimeError(f"the ensemble differs from its members' mean by {difference:.3g}")
     save_scenario(scenario, out / "scenario.yaml")
-    records = []
-    for run, _ in ranked:
-        with open(run / "config.yaml", encoding="utf-8") as stream:
-            records.append(yaml.safe_load(stream))
     record = {
-        "algorithm": f"{records[0].get('algorithm', 'policy')}_ensemble",
+        "algorithm": algorithm,
         "scenario": scenario.name,
         "top": top,
         "candidates": [str(run) for run in runs],
@@ -137,7 +165,7 @@ def build_ensemble(
             for (run, score), rec in zip(ranked, records)
         ],
         # the members' training, summed: what the ensemble cost to train on one machine
-        "agent_steps": int(sum(rec.get("agent_steps", 0) for rec in records)),
+        "agent_steps": int(sum(rec.get("agent_steps", rec.get("frames", 0)) for rec in records)),
         "wall_time_s": float(sum(rec.get("wall_time_s", 0.0) for rec in records)),
     }
     with open(out / "config.yaml", "w", encoding="utf-8") as stream:

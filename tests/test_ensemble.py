@@ -109,3 +109,37 @@ def test_an_ensemble_of_a_scene_distribution_over_n_is_built_and_flies_any_n(
     for n_uav, group in groups.items():
         obs = FormationEpisodes(swarm, len(group), n_uav=n_uav).reset(seed=group).observation
         assert policy.act_batch(obs).shape == (len(group), n_uav, 3)
+
+
+def test_on_policy_runs_ensemble_by_their_last_evaluation_in_their_action_mode(
+    tmp_path: Path,
+) -> None:
+    from uav_formation_baselines.onpolicy_config import load_config
+    from uav_formation_baselines.onpolicy_trainer import OnPolicyTrainer, build_scenario
+    from uav_formation_env.policies.action_modes import VelocitySetpointPolicy
+
+    tiny = {"copies": 2, "rollout_steps": 4, "epochs": 1, "minibatches": 1, "eval_seeds": 1}
+    config = load_config("ppo", {**tiny, "hidden": [8], "env": {"duration": 2.0}})
+    scenario = build_scenario("paper", config)
+    frames = config.rollout_steps * config.copies * scenario.n_uav
+    runs = []
+    for seed in (0, 1):
+        run = tmp_path / f"ppo_s{seed}"
+        OnPolicyTrainer("ppo", scenario, config, seed, frames, run).train(progress=False)
+        runs.append(run)
+    # the last evaluation scores a run; the better one ranks first
+    lines = (runs[1] / "progress.csv").read_text().splitlines()
+    header, last = lines[0].split(","), lines[-1].split(",")
+    last[header.index("eval_completed")] = "1"
+    last[header.index("eval_J")] = "5.0"
+    (runs[1] / "progress.csv").write_text("\n".join([*lines[:-1], ",".join(last)]) + "\n")
+    ranked = rank_runs(runs)
+    assert ranked[0][0] == runs[1] and ranked[0][1]["validation_cost"] == 5.0
+    assert ranked[0][1]["source"] == "progress.csv" and ranked[0][1]["round"] == 1
+    record = build_ensemble(runs, tmp_path / "ens")
+    assert record["algorithm"] == "ppo_ensemble" and record["agent_steps"] == 2 * frames
+    ensemble = load_policy_file(tmp_path / "ens")
+    assert ensemble.header["algorithm"] == "ppo_ensemble" and ensemble.header["members"] == 2
+    # trained in the velocity action mode: flown through the set-point loop, as its members
+    flown = make_policy(str(tmp_path / "ens"), scenario)
+    assert isinstance(flown, VelocitySetpointPolicy)
