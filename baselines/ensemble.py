@@ -104,6 +104,21 @@ def rank_runs(runs: list[str | Path]) -> list[tuple[Path, dict[str, Any]]]:
     )
 
 
+def _combined(policies: list[Any]) -> tuple[list[Any], np.ndarray, np.ndarray, Any, Any]:
+    """The networks of ``policies`` as one file's (members, obs_mean, obs_std, observation_clip,
+    member_statistics): without a clip, one set of statistics with the others absorbed into the
+    first layers (:func:`merge_members`); with one (not linear), each member keeps its own."""
+    clips = {policy.header["observation_clip"] for policy in policies}
+    if len(clips) != 1:
+        raise ValueError(f"the members clip their observations differently: {sorted(clips)}")
+    clip, parts = clips.pop(), [part for policy in policies for part in policy.parts()]
+    if clip is None:
+        members, mean, std = merge_members(parts)
+        return members, mean, std, None, None
+    statistics = [(member_mean, member_std) for _, member_mean, member_std in parts]
+    return [layers for layers, _, _ in parts], *statistics[0], clip, statistics
+
+
 def build_ensemble(
     runs: list[str | Path], out: str | Path, top: int | None = None
 ) -> dict[str, Any]:
@@ -129,7 +144,7 @@ def build_ensemble(
         raise ValueError(f"the members use different activations: {sorted(activations)}")
     if any(policy.header["action"] != "clip" for policy in policies):
         raise ValueError("an ensemble averages unsquashed actions: members need action 'clip'")
-    members, mean, std = merge_members([part for p in policies for part in p.parts()])
+    members, mean, std, clip, statistics = _combined(policies)
     records = []
     for run, _ in ranked:
         with open(run / "config.yaml", encoding="utf-8") as stream:
@@ -143,7 +158,9 @@ def build_ensemble(
         std,
         observation=scenario.observation.kind,
         activation=activations.pop(),
+        observation_clip=clip,
         metadata={"scenario": scenario.name, "algorithm": algorithm},
+        member_statistics=statistics,
     )
     # the file must give the members' mean action on the first observations of episodes 0, 1
     # (of one N: a scene distribution over N, random_swarm, may draw two)

@@ -140,6 +140,11 @@ def test_on_policy_runs_ensemble_by_their_last_evaluation_in_their_action_mode(
     assert record["algorithm"] == "ppo_ensemble" and record["agent_steps"] == 2 * frames
     ensemble = load_policy_file(tmp_path / "ens")
     assert ensemble.header["algorithm"] == "ppo_ensemble" and ensemble.header["members"] == 2
+    # each member clips its own normalised observation: far out of its statistics, too
+    far = np.random.default_rng(0).normal(scale=1e3, size=(16, ensemble.observation_size))
+    members = [load_policy_file(run) for run in runs]
+    want = sum(member.outputs(far) for member in members) / 2
+    np.testing.assert_allclose(ensemble.outputs(far), want, atol=1e-5)
     # trained in the velocity action mode: flown through the set-point loop, as its members
     flown = make_policy(str(tmp_path / "ens"), scenario)
     assert isinstance(flown, VelocitySetpointPolicy)

@@ -56,6 +56,36 @@ def test_actions_by_hand(tmp_path: Path) -> None:
     assert policy.act_batch(np.zeros((4, 5, 2))).shape == (4, 5, 3)
 
 
+def test_members_with_their_own_statistics_clip_their_own_normalisation(tmp_path: Path) -> None:
+    layers = [
+        (np.array([[1.0, 0.0], [0.0, -1.0]]), np.array([0.0, 0.5])),
+        (np.array([[1.0, 1.0], [2.0, 0.0], [0.0, 0.0]]), np.array([0.0, 0.0, -0.25])),
+    ]
+    own = [(np.array([1.0, 0.0]), np.array([2.0, 1.0])), (np.array([0.0, 0.0]), np.ones(2))]
+    options = {"observation": "full", "activation": "relu", "observation_clip": 0.5}
+    path = save_policy_file(tmp_path, [layers, layers], *own[0], **options, member_statistics=own)
+    policy = load_policy_file(path)
+    # obs (3, 0.25): member 0 x = (1, 0.25) -> (0.5, 0.25), out (0.75, 1, -0.25); member 1
+    # x = (3, 0.25) -> (0.5, 0.25), the same; at obs (1.2, 0): member 0 x = (0.1, 0),
+    # h = (0.1, 0.5), out (0.6, 0.2, -0.25); member 1 x = (0.5, 0), the same h as at
+    # (0.5, 0.5): out (1, 1, -0.25); the mean (0.8, 0.6, -0.25)
+    np.testing.assert_allclose(
+        policy.outputs(np.array([[3.0, 0.25], [1.2, 0.0]])),
+        [[0.75, 1.0, -0.25], [0.8, 0.6, -0.25]],
+    )
+    parts = policy.parts()
+    np.testing.assert_array_equal(parts[1][1], own[1][0])
+    with pytest.raises(ValueError, match="one \\(mean, std\\) per member"):
+        save_policy_file(tmp_path / "x", [layers], *own[0], **options, member_statistics=own)
+    arrays = dict(np.load(path / "policy.npz"))
+    np.savez(path / "policy.npz", **{k: v for k, v in arrays.items() if k != "m1.obs_std"})
+    with pytest.raises(ValueError, match="missing array 'm1.obs_std'"):
+        FilePolicy(path)
+    np.savez(path / "policy.npz", **{k: v for k, v in arrays.items() if k != "m1.obs_mean"})
+    with pytest.raises(ValueError, match="member statistics need"):
+        FilePolicy(path)
+
+
 def test_merged_members_keep_each_members_own_statistics(tmp_path: Path) -> None:
     rng = np.random.default_rng(0)
     parts = []

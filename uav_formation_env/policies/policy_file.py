@@ -6,7 +6,10 @@ without running code (``allow_pickle=False``) and flies with numpy alone.
 and ``m{j}.b{l}`` (out,). The action of one observation is: x = (obs - obs_mean) / obs_std,
 clipped to +-``observation_clip`` when set; per member h = act(W h + b) through the hidden
 layers and a linear last layer of 3 outputs; the members' mean; then ``"clip"`` to [-1, 1] or
-``"tanh"``. Every trainer of the project that exports a torch policy writes this format.
+``"tanh"``. An ensemble of members normalised differently (each clipping its own normalised
+observation) holds ``m{j}.obs_mean`` / ``m{j}.obs_std`` (dim,) for every member j, which
+replace the file's statistics for that member. Every trainer of the project that exports a
+torch policy writes this format.
 
 A file with ``"agents": N`` in its header holds one network per UAV (IPPO): every weight has a
 leading N axis (``m{j}.w{l}`` (N, out, in), ``m{j}.b{l}`` (N, out)) and UAV i flies network i.
@@ -76,6 +79,7 @@ def save_policy_file(
     observation_clip: float | None = None,
     action: str = "clip",
     metadata: Mapping[str, Any] | None = None,
+    member_statistics: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> Path:
     """Write ``DIR/policy.json`` and ``DIR/policy.npz`` (float32 arrays); return ``directory``.
 
@@ -89,17 +93,22 @@ def save_policy_file(
         observation_clip: clip of the normalised observation (None: none).
         action: ``"clip"`` or ``"tanh"`` (last layer's output -> [-1, 1]).
         metadata: free JSON-serialisable fields (scenario, algorithm, frames, ...).
+        member_statistics: per member, its own ``(obs_mean, obs_std)`` (None: the file's).
     """
-    mean = np.asarray(obs_mean, dtype=np.float64)
-    std = np.asarray(obs_std, dtype=np.float64)
-    if mean.ndim != 1 or std.shape != mean.shape:
-        raise ValueError(
-            f"obs_mean and obs_std: need (dim,) vectors, got {mean.shape}, {std.shape}"
-        )
-    if not np.all(std > 0.0):
-        raise ValueError("obs_std: every entry must be > 0")
-    arrays = {"obs_mean": mean.astype(np.float32), "obs_std": std.astype(np.float32)}
+    arrays = _statistics("obs", obs_mean, obs_std)
+    mean = arrays["obs_mean"]
     layers = _check_members(members, mean.shape[0], arrays)
+    if member_statistics is not None:
+        if len(member_statistics) != len(members):
+            raise ValueError(
+                f"member_statistics: give one (mean, std) per member ({len(members)}), "
+                f"got {len(member_statistics)}"
+            )
+        for j, (member_mean, member_std) in enumerate(member_statistics):
+            own = _statistics(f"m{j}.obs", member_mean, member_std)
+            if own[f"m{j}.obs_mean"].shape != mean.shape:
+                raise ValueError(f"member_statistics: member {j}'s are not ({mean.shape[0]},)")
+            arrays.update(own)
     header = {
         "format": FORMAT,
         "version": VERSION,
@@ -119,6 +128,18 @@ def save_policy_file(
         np.savez(stream, **arrays)
     (directory / JSON_NAME).write_text(json.dumps(header, indent=2, default=_plain) + "\n")
     return directory
+
+
+def _statistics(prefix: str, mean: np.ndarray, std: np.ndarray) -> dict[str, np.ndarray]:
+    """``{prefix_mean, prefix_std}`` as float32 (dim,) vectors, or a ValueError naming them."""
+    mean, std = np.asarray(mean, dtype=np.float64), np.asarray(std, dtype=np.float64)
+    if mean.ndim != 1 or std.shape != mean.shape:
+        raise ValueError(
+            f"{prefix}_mean and {prefix}_std: need (dim,) vectors, got {mean.shape}, {std.shape}"
+        )
+    if not np.all(std > 0.0):
+        raise ValueError(f"{prefix}_std: every entry must be > 0")
+    return {f"{prefix}_mean": mean.astype(np.float32), f"{prefix}_std": std.astype(np.float32)}
 
 
 def _plain(value: Any) -> Any:
@@ -268,7 +289,30 @@ class FilePolicy(PolicyBase):
             raise ValueError(
                 f"{arrays_path}: obs_mean / obs_std must be ({self.observation_size},)"
             )
+        self._statistics = self._member_statistics(arrays, header["members"])
         self._activation = ACTIVATIONS[header["activation"]]
+
+    def _member_statistics(
+        self, arrays: Mapping[str, np.ndarray], members: int
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per member, the (obs_mean, obs_std) it normalises with: its own ``m{j}.obs_*`` if
+        the file has them (for every member of a shared policy), else the file's."""
+        own = [f"m{j}.obs_mean" in arrays for j in range(members)]
+        if not any(own):
+            return [(self._mean, self._std)] * members
+        where = self.path / ARRAYS_NAME
+        if not all(own) or self.agents is not None:
+            raise ValueError(
+                f"{where}: member statistics need m{{j}}.obs_mean and m{{j}}.obs_std for every "
+                "member of a shared policy"
+            )
+        statistics = [
+            (self._take(arrays, f"m{j}.obs_mean"), self._take(arrays, f"m{j}.obs_std"))
+            for j in range(members)
+        ]
+        if any(m.shape != self._mean.shape or sd.shape != m.shape for m, sd in statistics):
+            raise ValueError(f"{where}: member statistics must be ({self.observation_size},)")
+        return statistics
 
     def _take(self, arrays: Mapping[str, np.ndarray], name: str) -> np.ndarray:
         if name not in arrays:
@@ -306,7 +350,7 @@ class FilePolicy(PolicyBase):
     def parts(self) -> list[tuple[Layers, np.ndarray, np.ndarray]]:
         """Per member, (its layers, obs_mean, obs_std): the input of :func:`merge_members`."""
         self._shared_only("merging into an ensemble")
-        return [(layers, self._mean, self._std) for layers in self._members]
+        return [(layers, *stats) for layers, stats in zip(self._members, self._statistics)]
 
     def check_scenario(self, scenario: Scenario) -> None:
         """``ValueError`` naming both if the file cannot act on ``scenario``'s observations."""
@@ -326,13 +370,15 @@ class FilePolicy(PolicyBase):
     def _mean_output(self, obs: np.ndarray) -> np.ndarray:
         """(..., dim) observations -> (..., 3) the members' mean output; with ``agents``, obs is
         (B, agents, dim) and UAV i's row goes through network i."""
-        x = (np.asarray(obs, dtype=np.float64) - self._mean) / self._std
+        obs = np.asarray(obs, dtype=np.float64)
         clip = self.header["observation_clip"]
-        if clip is not None:
-            x = np.clip(x, -clip, clip)
-        total = np.zeros((*x.shape[:-1], 3))
-        for layers in self._members:
-            h = x
+        total = np.zeros((*obs.shape[:-1], 3))
+        normalised: dict[int, np.ndarray] = {}  # by statistics: one normalisation when shared
+        for layers, (mean, std) in zip(self._members, self._statistics):
+            if id(mean) not in normalised:
+                x = (obs - mean) / std
+                normalised[id(mean)] = x if clip is None else np.clip(x, -clip, clip)
+            h = normalised[id(mean)]
             for index, (weight, bias) in enumerate(layers):
                 h = _linear(h, weight, bias)
                 if index < len(layers) - 1:
