@@ -42,6 +42,7 @@ from uav_formation_baselines.evaluate import (
     model_path,
     run_scenario,
 )
+from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import mean_ci95, wilson_ci95, write_json
 from uav_formation_env.tasks import evaluation_scenario, training_scenario
@@ -212,7 +213,7 @@ def _header(path: Path) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="python -m uav_formation_baselines.results",
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -237,6 +238,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--compare", nargs="*", default=[REFERENCE], help="reference policies")
     parser.add_argument("--out", default=None, help="output directory")
     args = parser.parse_args(argv)
+    missing = [run for run in args.runs if not (Path(run) / "config.yaml").is_file()]
+    if missing:
+        parser.error(f"not a run directory (no config.yaml): {missing[0]}")
     if args.task is not None:
         scenario = evaluation_scenario(training_scenario(args.task))
     elif args.scenario:

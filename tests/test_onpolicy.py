@@ -404,6 +404,16 @@ def test_results_rows_are_configurations_not_seeds():
     assert configuration_label(best) == "ppo, best validation"
 
 
+def test_results_name_a_missing_run_in_one_line(tmp_path: Path, capsys) -> None:
+    from uav_formation_baselines.results import main as results_main
+
+    with pytest.raises(SystemExit) as stop:
+        results_main([str(tmp_path / "nowhere"), "--seeds", "1"])
+    error = capsys.readouterr().err
+    assert stop.value.code == 2 and error.count("\n") == 1
+    assert "not a run directory (no config.yaml)" in error and "nowhere" in error
+
+
 def test_init_member_starts_from_one_network_of_an_ensemble(tmp_path: Path):
     student = Path(__file__).resolve().parents[1] / "baselines" / "models" / "paper_dagger"
     env = {**TINY["env"], "episode": {"action": "acceleration"}, "observation": {"kind": "local"}}
