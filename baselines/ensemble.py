@@ -190,6 +190,11 @@ def build_ensemble(
     return record
 
 
+def _run_name(run: Path) -> str:
+    """A member's name in messages: the run's folder (``RUN/best`` for a run's best policy)."""
+    return f"{run.parent.name}/{run.name}" if run.name == "best" else run.name
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = OneLineParser(description=__doc__.split("\n")[0])
     parser.add_argument("runs", nargs="+", help="finished run directories (same scenario)")
@@ -207,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, KeyError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    names = ", ".join(Path(m["run"]).name for m in record["members"])
+    names = ", ".join(_run_name(Path(m["run"])) for m in record["members"])
     print(f"wrote the policy {args.out}: the mean of {len(record['members'])} members ({names})")
     report_run(args.out, args.heldout_seeds)
     return 0

@@ -112,7 +112,7 @@ def test_an_ensemble_of_a_scene_distribution_over_n_is_built_and_flies_any_n(
 
 
 def test_on_policy_runs_ensemble_by_their_last_evaluation_in_their_action_mode(
-    tmp_path: Path,
+    tmp_path: Path, capsys
 ) -> None:
     from uav_formation_baselines.onpolicy_config import load_config
     from uav_formation_baselines.onpolicy_trainer import OnPolicyTrainer, build_scenario
@@ -145,6 +145,12 @@ def test_on_policy_runs_ensemble_by_their_last_evaluation_in_their_action_mode(
     members = [load_policy_file(run) for run in runs]
     want = sum(member.outputs(far) for member in members) / 2
     np.testing.assert_allclose(ensemble.outputs(far), want, atol=1e-5)
+    # a run's best policy (the trainer kept one) is a member like a run, named with its run
+    best = runs[0] / "best"
+    assert rank_runs([best])[0][1]["source"] == "selected_by"
+    out = ["--out", str(tmp_path / "ens2"), str(best), str(runs[1]), "--heldout-seeds", "0"]
+    assert main(out) == 0
+    assert "(ppo_s1, ppo_s0/best)" in capsys.readouterr().out  # ranked: s1 scored better
     # trained in the velocity action mode: flown through the set-point loop, as its members
     flown = make_policy(str(tmp_path / "ens"), scenario)
     assert isinstance(flown, VelocitySetpointPolicy)
