@@ -81,12 +81,15 @@ def read_policy(
             raise ValueError(
                 f"--init-member: {directory} has networks 0..{members - 1}, got {member}"
             )
-        prefix = f"m{member}."  # its layers as network 0; the statistics are shared
+        prefix = f"m{member}."  # its layers (and own statistics, if any) as network 0's
         arrays = {
             ("m0." + key[len(prefix) :] if key.startswith(prefix) else key): value
             for key, value in arrays.items()
             if key.startswith(prefix) or not key.startswith("m")
         }
+        for name in ("obs_mean", "obs_std"):  # a member's own statistics replace the file's
+            if f"m0.{name}" in arrays:
+                arrays[name] = arrays.pop(f"m0.{name}")
         header = {**header, "members": 1}
     elif members != 1:
         raise ValueError(

@@ -436,3 +436,18 @@ def test_init_member_starts_from_one_network_of_an_ensemble(tmp_path: Path):
         atol=1e-5,
     )
     assert trainer.metadata()["init_member"] == 1
+    # a member with statistics of its own starts from them, not from the file's
+    first, _, _ = load_policy_file(student).parts()[0]
+    wide = std > 1e-3  # RunningNorm floors a std at 1e-4: move only the slots that vary
+    own = [(mean, std), (mean + 0.5 * std * wide, np.where(wide, 2.0 * std, std))]
+    kind = {"observation": "local", "activation": "tanh"}
+    save_policy_file(tmp_path / "own", [first, layers], mean, std, **kind, member_statistics=own)
+    save_policy_file(tmp_path / "one_own", [layers], *own[1], **kind)
+    again = OnPolicyTrainer(
+        "ppo", scenario, config, 0, 1, tmp_path / "c", init=tmp_path / "own", init_member=1
+    )
+    np.testing.assert_allclose(
+        TorchActorPolicy(again.model).act_batch(obs),
+        load_policy_file(tmp_path / "one_own").act_batch(obs),
+        atol=1e-5,
+    )
