@@ -20,10 +20,18 @@ reference), torch on the CPU with the same generators and with counter draws, an
 both; and on CUDA the paper reproduction, ``uav-formation reproduce --backend torch
 --random-source counter`` of the 4 variants x ``--reproduce-seeds`` seeds (200 s episodes).
 
-Without a GPU it says so and measures the CPU rows only.
+Last, the in-process RL trainer (``uav_formation_baselines.onpolicy``, PPO on the paper's training
+task, shipped hyper-parameters, no evaluations): agent-steps/s at ``--trainer-copies`` copies, on
+the numpy episode layer on the CPU and on the torch episode layer on CUDA.
+
+Without a GPU it says so and measures the CPU rows only. ``--parts`` picks the tables (``env``,
+``trainer``, ``dmpc``) and the devices of their rows (``cpu``, ``cuda``; the numpy reference rows
+are always measured), e.g. the CPU rows in one process and the CUDA rows in another, at the same
+time on a many-core machine.
 
     python benchmarks/bench_gpu.py [--scenario paper] [--seconds 3] [--batches 4096 65536 262144]
                                    [--dmpc-batch 100] [--dmpc-steps 10] [--reproduce-seeds 100]
+                                   [--parts env trainer dmpc cpu cuda] [--trainer-copies 128 4096]
 """
 
 from __future__ import annotations
@@ -147,13 +155,55 @@ def reproduce_seconds(seeds: int, device: str) -> float:
     return time.perf_counter() - start
 
 
-def dmpc_rows(args, cuda: bool) -> None:
-    """The reference policy's table (seconds per control step, ratio to numpy)."""
+def trainer_rate(copies: int, updates: int, device: str) -> float:
+    """Agent-steps/s of the in-process PPO trainer on the paper's training task: ``updates``
+    updates of ``copies`` copies after one warm-up update (the numpy episode layer on the CPU,
+    the torch one elsewhere; one torch thread)."""
+    import tempfile
+
+    from uav_formation_baselines.onpolicy_config import load_config
+    from uav_formation_baselines.onpolicy_trainer import OnPolicyTrainer, build_scenario
+
+    overrides = {"copies": copies, "eval_every": 0, "eval_seeds": 1}
+    config = load_config("ppo", overrides, None)
+    scenario = build_scenario("paper", config)
+    with tempfile.TemporaryDirectory() as out:
+        trainer = OnPolicyTrainer("ppo", scenario, config, 0, 1, out, device)
+        trainer.train(progress=False)  # the warm-up update (and one evaluation, not timed)
+        wall, frames = trainer.wall, trainer.frames
+        trainer.updates += updates
+        trainer.train(progress=False)
+        return (trainer.frames - frames) / (trainer.wall - wall)
+
+
+def trainer_rows(args, parts: set[str], cuda: bool) -> None:
+    """The RL trainer's table (agent-steps/s): the numpy rows with ``cpu`` in ``--parts``, the
+    CUDA rows with ``cuda``."""
+    print("\nin-process PPO trainer, paper training task, shipped hyper-parameters\n")
+    print("| episode layer | copies | agent-steps/s |")
+    print("|---|---:|---:|")
+    devices = ["cpu"] if "cpu" in parts else []
+    devices += ["cuda"] if cuda and "cuda" in parts else []
+    for copies in args.trainer_copies:
+        for device in devices:
+            rate = trainer_rate(copies, args.trainer_updates, device)
+            label = "numpy, cpu" if device == "cpu" else "torch, cuda"
+            print(f"| {label} | {copies} | {rate:,.0f} |", flush=True)
+    if not cuda and "cuda" in parts:
+        print("\nno CUDA device: the trainer's CUDA rows are not measured")
+
+
+def dmpc_rows(args, parts: set[str], cuda: bool) -> None:
+    """The reference policy's table (seconds per control step, ratio to numpy): numpy always,
+    the torch CPU rows with ``cpu`` in ``--parts``, the CUDA rows and the reproduction with
+    ``cuda``."""
     cases = [("numpy, generator", "numpy", None, "generator")]
-    cases += [
-        ("torch cpu, generator", "torch", "cpu", "generator"),
-        ("torch cpu, counter", "torch", "cpu", "counter"),
-    ]
+    if "cpu" in parts:
+        cases += [
+            ("torch cpu, generator", "torch", "cpu", "generator"),
+            ("torch cpu, counter", "torch", "cpu", "counter"),
+        ]
+    cuda = cuda and "cuda" in parts
     if cuda:
         cases += [
             ("torch cuda, generator", "torch", "cuda", "generator"),
@@ -166,15 +216,54 @@ def dmpc_rows(args, cuda: bool) -> None:
     for label, backend, device, random in cases:
         seconds = dmpc_step_seconds(args.dmpc_batch, args.dmpc_steps, backend, device, random)
         reference = reference or seconds
-        print(f"| {label} | {seconds:.3f} | {reference / seconds:.2f}x |")
-    if cuda:
+        print(f"| {label} | {seconds:.3f} | {reference / seconds:.2f}x |", flush=True)
+    if cuda and args.reproduce_seeds > 0:
         wall = reproduce_seconds(args.reproduce_seeds, "cuda")
         print(
             f"\nreproduce --backend torch --device cuda --random-source counter, 4 variants x "
             f"{args.reproduce_seeds} seeds: {wall:.1f} s"
         )
-    else:
+    elif "cuda" in parts:
         print("\nno CUDA device: the CUDA DMPC rows and the reproduction's time are not measured")
+
+
+def episode_rows(args, scenario, parts: set[str], torch) -> None:
+    """The episode layer's table (env-steps/s, ratio to numpy at ``--cpu-batch``), a row printed
+    as soon as it is measured."""
+    reference = episode_rate(scenario, args.cpu_batch, args.seconds, "numpy")
+    print(f"\nscenario {scenario.name!r}, N = {scenario.n_uav}, {args.seconds:.1f} s per row\n")
+    print(f"| backend | B | env-steps/s | vs numpy B={args.cpu_batch} |")
+    print("|---|---:|---:|---:|")
+
+    def row(name: str, batch: int, rate: float | None) -> None:
+        figure = "not installed | " if rate is None else f"{rate:,.0f} | {rate / reference:.2f}x"
+        print(f"| {name} | {batch} | {figure} |", flush=True)
+
+    if "cpu" in parts:
+        row("numpy", 1, episode_rate(scenario, 1, args.seconds, "numpy"))
+    row("numpy", args.cpu_batch, reference)
+    if torch is not None and "cpu" in parts:
+        for label, compile_, noise in (
+            ("", False, "generator"),
+            (", compiled", True, "generator"),
+            (", compiled, counter noise", True, "counter"),
+        ):
+            rate = episode_rate(
+                scenario, args.cpu_batch, args.seconds, "torch", "cpu", compile_, noise
+            )
+            row("torch cpu (1 thread)" + label, args.cpu_batch, rate)
+    if torch is not None and "cuda" in parts and torch.cuda.is_available():
+        for batch in args.batches:
+            for compile_, noise in ((False, "generator"), (True, "counter")):
+                rate = episode_rate(scenario, batch, args.seconds, "torch", "cuda", compile_, noise)
+                row("torch cuda" + (", compiled, counter noise" if compile_ else ""), batch, rate)
+            for name in ("simple_spread", "navigation"):
+                row(f"vmas {name}", batch, vmas_rate(name, batch, args.seconds, "cuda"))
+    elif "cuda" in parts:
+        print("no CUDA device: the GPU rows (torch cuda, VMAS) are not measured")
+
+
+PARTS = ("env", "trainer", "dmpc", "cpu", "cuda")
 
 
 def main() -> None:
@@ -186,49 +275,26 @@ def main() -> None:
     parser.add_argument("--dmpc-batch", type=int, default=100, help="copies of the DMPC rows")
     parser.add_argument("--dmpc-steps", type=int, default=10, help="control steps per DMPC row")
     parser.add_argument("--reproduce-seeds", type=int, default=100, help="seeds (CUDA only)")
+    parser.add_argument("--trainer-copies", type=int, nargs="+", default=[128, 4096])
+    parser.add_argument("--trainer-updates", type=int, default=5, help="timed updates per row")
+    parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     args = parser.parse_args()
+    parts = set(args.parts)
     scenario = resolve_scenario(args.scenario)
-    rows: list[tuple[str, int, float | None]] = []
-    rows.append(("numpy", 1, episode_rate(scenario, 1, args.seconds, "numpy")))
-    reference = episode_rate(scenario, args.cpu_batch, args.seconds, "numpy")
-    rows.append(("numpy", args.cpu_batch, reference))
     try:
         import torch
     except ImportError:
         torch = None
         print("torch is not installed: the torch rows are not measured")
-    if torch is not None:
+    else:
         torch.set_num_threads(1)  # one core, as the numpy rows
-        cpu = episode_rate(scenario, args.cpu_batch, args.seconds, "torch", "cpu")
-        rows.append(("torch cpu (1 thread)", args.cpu_batch, cpu))
-        cpu = episode_rate(scenario, args.cpu_batch, args.seconds, "torch", "cpu", compile=True)
-        rows.append(("torch cpu (1 thread), compiled", args.cpu_batch, cpu))
-        cpu = episode_rate(scenario, args.cpu_batch, args.seconds, "torch", "cpu", True, "counter")
-        rows.append(("torch cpu (1 thread), compiled, counter noise", args.cpu_batch, cpu))
-        if torch.cuda.is_available():
-            for batch in args.batches:
-                for compile_, noise in ((False, "generator"), (True, "counter")):
-                    rate = episode_rate(
-                        scenario, batch, args.seconds, "torch", "cuda", compile_, noise
-                    )
-                    label = ", compiled, counter noise" if compile_ else ""
-                    rows.append(("torch cuda" + label, batch, rate))
-                for name in ("simple_spread", "navigation"):
-                    rows.append(
-                        (f"vmas {name}", batch, vmas_rate(name, batch, args.seconds, "cuda"))
-                    )
-        else:
-            print("no CUDA device: the GPU rows (torch cuda, VMAS) are not measured")
-    print(f"\nscenario {scenario.name!r}, N = {scenario.n_uav}, {args.seconds:.1f} s per row\n")
-    print(f"| backend | B | env-steps/s | vs numpy B={args.cpu_batch} |")
-    print("|---|---:|---:|---:|")
-    for name, batch, rate in rows:
-        if rate is None:
-            print(f"| {name} | {batch} | not installed | |")
-        else:
-            print(f"| {name} | {batch} | {rate:,.0f} | {rate / reference:.2f}x |")
-    if torch is not None and args.dmpc_steps > 0:
-        dmpc_rows(args, torch.cuda.is_available())
+    cuda = torch is not None and torch.cuda.is_available()
+    if "env" in parts:
+        episode_rows(args, scenario, parts, torch)
+    if torch is not None and "trainer" in parts:
+        trainer_rows(args, parts, cuda)
+    if torch is not None and "dmpc" in parts and args.dmpc_steps > 0:
+        dmpc_rows(args, parts, cuda)
 
 
 if __name__ == "__main__":
