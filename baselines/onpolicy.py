@@ -52,7 +52,7 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
         default="paper",
         help="registered scenario name or YAML path; a comma-separated list (hold,track,paper) "
         "is a curriculum: the copies move to the next task after an evaluation that completes "
-        "promote_at of its missions",
+        "promote_at of its missions with its mean route error max <= promote_route_error",
     )
     parser.add_argument("--seed", type=integer_at_least(0), default=0)
     parser.add_argument(

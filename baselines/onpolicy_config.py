@@ -66,6 +66,8 @@ class OnPolicyConfig:
     eval_seed_start: int = 1000  # first evaluation seed (training copies draw from 10^6 on)
     reward: str = "train"  # "train": the task under tasks.TRAINING_PRESET; "paper": -J_i
     promote_at: float = 0.75  # curriculum: completed fraction of an evaluation that moves up
+    # curriculum: and the evaluation's mean route error max below this [m] (0: no such bound)
+    promote_route_error: float = 80.0
     env: Mapping[str, Any] = field(default_factory=dict)  # scenario overrides (with_overrides)
 
     def __post_init__(self) -> None:
@@ -92,6 +94,10 @@ class OnPolicyConfig:
         flags = ("anneal_lr", "clip_vloss", "value_norm", "bootstrap_diverged", "norm_adv")
         if not _real(self.promote_at) or not 0.0 <= self.promote_at <= 1.0:
             raise ValueError(f"promote_at must be a number in [0, 1], got {self.promote_at!r}")
+        if not _real(self.promote_route_error) or self.promote_route_error < 0:
+            raise ValueError(
+                f"promote_route_error must be a number >= 0 [m], got {self.promote_route_error!r}"
+            )
         if self.reward not in ("train", "paper"):
             raise ValueError(f"reward must be 'train' or 'paper', got {self.reward!r}")
         for name in (*flags, "reward_scaling"):

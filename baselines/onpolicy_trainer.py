@@ -556,6 +556,9 @@ class OnPolicyTrainer:
         rate = self.last_eval["eval_completed"] / max(1, self.last_eval["eval_episodes"])
         if rate < self.config.promote_at:
             return False
+        bound = self.config.promote_route_error
+        if bound and not self.last_eval["eval_route_error_max_m"] <= bound:
+            return False
         self._start_task(self.ladder[following])
         return True
 

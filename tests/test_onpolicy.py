@@ -189,6 +189,8 @@ def test_config_rejects_unknown_keys_and_bad_values():
         OnPolicyConfig(gamma=1.5)
     with pytest.raises(ValueError, match="hidden"):
         OnPolicyConfig(hidden=[64, 0])
+    with pytest.raises(ValueError, match=r"promote_route_error must be a number >= 0 \[m\]"):
+        OnPolicyConfig(promote_route_error=-1.0)
     with pytest.raises(ValueError, match="unknown scenario key 'episode.rewrd'"):
         build_scenario("paper", OnPolicyConfig(env={"episode": {"rewrd": "raw"}}))
 
@@ -351,6 +353,36 @@ def test_curriculum_moves_up_after_a_completed_evaluation(tmp_path: Path) -> Non
         OnPolicyTrainer("ppo", hold, config, 0, 1, tmp_path, ladder=[build_scenario("n3", config)])
 
 
+def test_curriculum_waits_for_the_route_error_bound(tmp_path: Path) -> None:
+    config = load_config("ppo", {**TINY, "copies": 2, "promote_route_error": 80.0})
+    hold, track = (build_scenario(t, config) for t in ("hold", "track"))
+    short = [with_overrides(s, {"duration": 20.0}) for s in (hold, track)]
+    trainer = OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+
+    def evaluated(completed: int, route_error_max: float) -> bool:
+        trainer.last_eval = {
+            "eval_completed": completed,
+            "eval_episodes": 4,
+            "eval_route_error_max_m": route_error_max,
+        }
+        return trainer.promote()
+
+    assert not evaluated(4, 80.5)  # every mission completed, but too far from the route
+    assert not evaluated(4, float("nan"))
+    assert not evaluated(2, 10.0)  # on the route, but under promote_at (0.75) of the missions
+    assert trainer.scenario.name == "hold"
+    assert evaluated(3, 80.0) and trainer.scenario.name == "track"
+
+
+def test_no_route_error_bound_promotes_on_completion_alone(tmp_path: Path) -> None:
+    config = load_config("ppo", {**TINY, "copies": 2, "promote_route_error": 0.0})
+    hold, track = (build_scenario(t, config) for t in ("hold", "track"))
+    short = [with_overrides(s, {"duration": 20.0}) for s in (hold, track)]
+    trainer = OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+    trainer.last_eval = {"eval_completed": 3, "eval_episodes": 4, "eval_route_error_max_m": 500.0}
+    assert trainer.promote() and trainer.scenario.name == "track"
+
+
 def test_the_best_evaluation_on_the_last_task_is_kept_as_a_policy(tmp_path: Path) -> None:
     config = load_config("ppo", {**TINY, "copies": 2, "promote_at": 0.0})
     hold, track = (build_scenario(t, config) for t in ("hold", "track"))
@@ -365,6 +397,7 @@ def test_the_best_evaluation_on_the_last_task_is_kept_as_a_policy(tmp_path: Path
             "eval_episodes": 2,
             "eval_collisions": collisions,
             "eval_J": cost,
+            "eval_route_error_max_m": 50.0,
         }
         return trainer.keep_best()
 
