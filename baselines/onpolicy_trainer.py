@@ -549,7 +549,8 @@ class OnPolicyTrainer:
 
     def promote(self) -> bool:
         """Move to the next task of the curriculum if the last evaluation completed at least
-        ``promote_at`` of its missions; returns whether it moved."""
+        ``promote_at`` of its missions and its mean route error max is at most
+        ``promote_route_error`` [m] (0: no bound); returns whether it moved."""
         following = self.curriculum.index(self.scenario.name) + 1
         if following >= len(self.ladder) or not self.last_eval:
             return False
