@@ -353,11 +353,16 @@ def test_curriculum_moves_up_after_a_completed_evaluation(tmp_path: Path) -> Non
         OnPolicyTrainer("ppo", hold, config, 0, 1, tmp_path, ladder=[build_scenario("n3", config)])
 
 
-def test_curriculum_waits_for_the_route_error_bound(tmp_path: Path) -> None:
-    config = load_config("ppo", {**TINY, "copies": 2, "promote_route_error": 80.0})
+def _hold_then_track(config: OnPolicyConfig, tmp_path: Path) -> OnPolicyTrainer:
+    """A PPO trainer on a 20 s ``hold`` whose curriculum goes on to a 20 s ``track``."""
     hold, track = (build_scenario(t, config) for t in ("hold", "track"))
     short = [with_overrides(s, {"duration": 20.0}) for s in (hold, track)]
-    trainer = OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+    return OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+
+
+def test_curriculum_waits_for_the_route_error_bound(tmp_path: Path) -> None:
+    config = load_config("ppo", {**TINY, "copies": 2, "promote_route_error": 80.0})
+    trainer = _hold_then_track(config, tmp_path)
 
     def evaluated(completed: int, route_error_max: float) -> bool:
         trainer.last_eval = {
@@ -376,18 +381,14 @@ def test_curriculum_waits_for_the_route_error_bound(tmp_path: Path) -> None:
 
 def test_no_route_error_bound_promotes_on_completion_alone(tmp_path: Path) -> None:
     config = load_config("ppo", {**TINY, "copies": 2, "promote_route_error": 0.0})
-    hold, track = (build_scenario(t, config) for t in ("hold", "track"))
-    short = [with_overrides(s, {"duration": 20.0}) for s in (hold, track)]
-    trainer = OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+    trainer = _hold_then_track(config, tmp_path)
     trainer.last_eval = {"eval_completed": 3, "eval_episodes": 4, "eval_route_error_max_m": 500.0}
     assert trainer.promote() and trainer.scenario.name == "track"
 
 
 def test_the_best_evaluation_on_the_last_task_is_kept_as_a_policy(tmp_path: Path) -> None:
     config = load_config("ppo", {**TINY, "copies": 2, "promote_at": 0.0})
-    hold, track = (build_scenario(t, config) for t in ("hold", "track"))
-    short = [with_overrides(s, {"duration": 20.0}) for s in (hold, track)]
-    trainer = OnPolicyTrainer("ppo", short[0], config, 0, 1, tmp_path, ladder=[short[1]])
+    trainer = _hold_then_track(config, tmp_path)
     best = tmp_path / "best"
 
     def evaluated(completed: int, collisions: int, cost: float) -> bool:
@@ -415,7 +416,7 @@ def test_the_best_evaluation_on_the_last_task_is_kept_as_a_policy(tmp_path: Path
     assert yaml.safe_load((best / "config.yaml").read_text())["algorithm"] == "ppo"
     load_policy_file(best)  # a policy directory evaluate --policy flies
     trainer.save()  # a resumed run remembers what it has to beat
-    again = OnPolicyTrainer("ppo", short[1], config, 0, 1, tmp_path, resume=True)
+    again = OnPolicyTrainer("ppo", trainer.scenario, config, 0, 1, tmp_path, resume=True)
     assert again.best == [2, -9, -9.0]
 
 
