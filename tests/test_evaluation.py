@@ -69,6 +69,33 @@ def test_cli_evaluate_writes_records_and_summary(tmp_path, policy):
     assert (out / "trajectories.png").stat().st_size > 10_000
 
 
+def test_cli_evaluate_compare_flies_the_reference_on_the_same_seeds(tmp_path, capsys):
+    argv = ["evaluate", "--seeds", "2", "--duration", "16", "--quiet"]
+    alone, compared = tmp_path / "heuristic", tmp_path / "random"
+    assert cli_main([*argv, "--policy", "heuristic", "--out", str(alone)]) == 0
+    capsys.readouterr()
+    compare = ["--policy", "random", "--compare", "heuristic", "--out", str(compared)]
+    assert cli_main([*argv, *compare]) == 0
+    printed = capsys.readouterr().out
+    heuristic = json.loads((alone / "summary.json").read_text())
+    summary = json.loads((compared / "summary.json").read_text())
+    reference = summary["reference"]
+    assert reference["policy"] == "heuristic"
+    assert reference["realised_cost_mean"] == heuristic["realised_cost_mean"]
+    assert reference["completed"] == heuristic["mission"]["completed"]
+    ratio = summary["realised_cost_mean"] / heuristic["realised_cost_mean"]
+    assert reference["cost_ratio"] == pytest.approx(ratio, rel=1e-12)
+    assert f"{ratio:.3g} x HEURISTIC's {heuristic['realised_cost_mean']:.4g}" in printed
+
+
+def test_cli_evaluate_compare_with_an_unknown_policy_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "eval"
+    argv = ["evaluate", "--policy", "heuristic", "--compare", "nonesuch", "--seeds", "1"]
+    assert cli_main([*argv, "--duration", "4", "--quiet", "--out", str(out)]) == 2
+    assert "nonesuch" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_random_policy_costs_more_than_heuristic(tmp_path):
     costs = {}
     for policy in ("heuristic", "random"):

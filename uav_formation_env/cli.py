@@ -172,6 +172,24 @@ def _mission_lines(summary: dict) -> list[str]:
     return lines
 
 
+def _reference_summary(
+    name: str, scenario, policy, seeds: list[int], batch_size: int, progress: bool, options: dict
+) -> dict:
+    """The reference ``name`` flown on the same scenario and seeds: its missions completed and
+    realised J per UAV (``summary.json``'s ``reference``)."""
+    from uav_formation_env.evaluation import fly_in_chunks, summarise_digests
+
+    digests = fly_in_chunks(
+        scenario, policy, seeds, batch_size, policy_name=name, progress=progress, **options
+    )
+    summary = summarise_digests(digests)
+    return {
+        "policy": name,
+        "completed": int(summary["mission"]["completed"]),
+        "realised_cost_mean": float(summary["realised_cost_mean"]),
+    }
+
+
 def _evaluate(args: argparse.Namespace) -> int:
     from uav_formation_env.core.array_api import torch_device
     from uav_formation_env.evaluation import (
@@ -183,6 +201,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         write_json,
         write_records,
     )
+    from uav_formation_env.evaluation.heldout import versus_reference
     from uav_formation_env.plotting import plot_trajectories
     from uav_formation_env.policies.shield import SafetyShield
     from uav_formation_env.scenes import n_uav_range
@@ -203,8 +222,11 @@ def _evaluate(args: argparse.Namespace) -> int:
             )
         if args.random_source != "generator":
             raise ValueError("--random-source counter is not available with --backend ray")
-        if args.shield:
-            raise ValueError("--shield is not available with --backend ray; use --backend local")
+        for flag in ("shield", "compare"):
+            if getattr(args, flag):
+                raise ValueError(
+                    f"--{flag} is not available with --backend ray; use --backend local"
+                )
         make_policy(args.policy, scenario, algo=args.algo)  # bad names fail here, not in a task
         check_out(args.out, args.overwrite)  # before the episodes, which write nothing
         with ray_session(args.address):
@@ -232,6 +254,9 @@ def _evaluate(args: argparse.Namespace) -> int:
         )
         if args.shield:
             policy = SafetyShield(policy, scenario)
+        reference = None
+        if args.compare:  # a bad name fails here, before any episode
+            reference = make_policy(args.compare, scenario, random=args.random_source)
         batches = None
     label = args.policy + (" + shield" if args.shield else "")
     first: list = []  # the first batch's first seed, for the figure
@@ -274,6 +299,12 @@ def _evaluate(args: argparse.Namespace) -> int:
                 "config": asdict(policy.config),
                 "intervention_rate": shielded_steps[0] / max(shielded_steps[1], 1),
             }
+        if reference is not None:
+            ref = _reference_summary(
+                args.compare, scenario, reference, seeds, args.batch_size, _progress(args), options
+            )
+            ref["cost_ratio"] = summary["realised_cost_mean"] / ref["realised_cost_mean"]
+            summary["reference"] = ref
         write_json(summary, out / "summary.json")
         positions, scenes, seed = first[0]
         plot_trajectories(
@@ -292,6 +323,16 @@ def _evaluate(args: argparse.Namespace) -> int:
     )
     for line in _mission_lines(summary):
         print(f"  {line}")
+    if "reference" in summary:
+        ref = summary["reference"]
+        versus = versus_reference(
+            summary["realised_cost_mean"],
+            ref["policy"],
+            ref["realised_cost_mean"],
+            ref["completed"],
+            len(seeds),
+        )
+        print(f"  realised J per UAV against {ref['policy']} on the same seeds: {versus}")
     if summary["triggers_mean"] is not None:
         print(f"  event-triggered steps per UAV: {summary['triggers_mean']:.1f}")
     if args.shield:
@@ -546,6 +587,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="fly the policy behind the safety shield (control barrier functions that keep "
         "each UAV out of the obstacles and away from the UAVs it senses; local observation "
         "layout): the result is the policy and the shield",
+    )
+    evaluate.add_argument(
+        "--compare",
+        default=None,
+        metavar="POLICY",
+        help="also fly this policy (e.g. lfpio) on the same seeds and print the realised J "
+        "against its (summary.json: reference)",
     )
     evaluate.add_argument(
         "--batch-size",

@@ -24,7 +24,14 @@ from uav_formation_env.evaluation.digest import fly_in_chunks, summarise_digests
 from uav_formation_env.policies.registry import BatchPolicy, make_policy
 from uav_formation_env.tasks import evaluation_scenario
 
-__all__ = ["HELDOUT_FILE", "HELDOUT_SEEDS", "HeldoutReport", "heldout_report", "report_run"]
+__all__ = [
+    "HELDOUT_FILE",
+    "HELDOUT_SEEDS",
+    "HeldoutReport",
+    "heldout_report",
+    "report_run",
+    "versus_reference",
+]
 
 HELDOUT_SEEDS = (0, 1, 2)  # the first evaluation seeds (training uses 1000+ and 5000+)
 HELDOUT_FILE = "heldout.json"
@@ -82,9 +89,9 @@ class HeldoutReport:
         ]
         cost = f"  realised J per UAV {self.cost:.4g}"
         if self.cost_ratio is not None:
-            cost += (
-                f" = {self.cost_ratio:.3g} x {self.reference.upper()}'s {self.reference_cost:.4g} "
-                f"(which completed {self.reference_completed} of {k}; lower J is better)"
+            assert self.reference is not None and self.reference_completed is not None
+            cost += " = " + versus_reference(
+                self.cost, self.reference, self.reference_cost, self.reference_completed, k
             )
         lines.append(cost)
         if self.training_reward is not None:
@@ -97,6 +104,17 @@ class HeldoutReport:
         data["seeds"] = list(self.seeds)
         data["cost_ratio"] = self.cost_ratio
         return data
+
+
+def versus_reference(
+    cost: float, reference: str, reference_cost: float, reference_completed: int, episodes: int
+) -> str:
+    """``"R x LFPIO's J_ref (which completed k of n; lower J is better)"``: a realised J per UAV
+    against a reference's on the same seeds."""
+    return (
+        f"{cost / reference_cost:.3g} x {reference.upper()}'s {reference_cost:.4g} "
+        f"(which completed {reference_completed} of {episodes}; lower J is better)"
+    )
 
 
 def _fly(scenario: Scenario, policy: BatchPolicy, seeds: Sequence[int], name: str, progress: bool):
