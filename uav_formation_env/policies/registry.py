@@ -61,7 +61,7 @@ MODELS_DIR = Path(__file__).resolve().parents[1] / "models"  # installed as pack
 SHIPPED_MODELS = {
     "random_fields_dagger": "DAgger students on random obstacle fields (random_fields)",
     "random_swarm_dagger": "DAgger students on random swarms of 3-10 UAVs (random_swarm)",
-    "paper_ppo": "PPO from the training reward alone (curriculum track, paper) on the paper",
+    "paper_ppo": "PPO from the training reward alone (curriculum hold, track, paper) on the paper",
 }
 PAPER_OPTIMIZERS = ("pio", "lfpio")  # the two the paper compares (its Table 2)
 POLICY_LABELS = {
