@@ -341,6 +341,7 @@ CLI_TABLE: list[tuple[str, Callable[[Path], list[str]], str]] = [
     ("counter draws on ray", lambda t: ["evaluate", "--backend", "ray", "--random-source", "counter", "--duration", "1"], r"--random-source counter is not available with --backend ray"),
     ("shield on the full layout", lambda t: ["evaluate", "--policy", "heuristic", "--shield", "--duration", "1"], r"safety shield reads the local observation layout.*'full'"),
     ("shield on ray", lambda t: ["evaluate", "--backend", "ray", "--shield", "--duration", "1"], r"--shield is not available with --backend ray"),
+    ("compare on ray", lambda t: ["evaluate", "--backend", "ray", "--compare", "lfpio", "--duration", "1"], r"--compare is not available with --backend ray"),
     ("evaluate onto an earlier run", lambda t: ["evaluate", "--policy", "heuristic", "--duration", "1", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
     ("reproduce onto an earlier run", lambda t: ["reproduce", "--quick", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),
     ("train onto an earlier run", lambda t: ["train", "--algo", "ppo", "--timesteps", "10", "--out", str(earlier_run(t))], r"--out .* is not empty .* --overwrite"),

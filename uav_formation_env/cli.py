@@ -212,6 +212,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     seeds = _seeds(args)
     desc = f"evaluate {Path(args.policy).name} x {len(seeds)} seeds"
     low, high = n_uav_range(scenario)
+    reference = None  # the --compare policy
     if args.backend == "ray":
         from uav_formation_env.distributed import ray_session, run_episodes_ray
 
@@ -254,7 +255,6 @@ def _evaluate(args: argparse.Namespace) -> int:
         )
         if args.shield:
             policy = SafetyShield(policy, scenario)
-        reference = None
         if args.compare:  # a bad name fails here, before any episode
             reference = make_policy(args.compare, scenario, random=args.random_source)
         batches = None
