@@ -3,9 +3,10 @@
 Rows, each measured in this run:
 
 * the numpy episode layer at B = 1 and B = 4,096 (the reference every ratio is taken against);
-* the torch episode layer on the CPU at B = 4,096: eager, with ``compile=True`` (the
-  observer's ticks through ``torch.compile``; its compilation is not timed), and also with
-  ``noise="counter"`` (the disturbance noise drawn on the device), same physics;
+* the torch episode layer on the CPU at B = 4,096: eager, with ``compile=True`` (the whole step
+  through ``torch.compile``; its compilation is not timed), and also with ``noise="counter"``
+  (the disturbance noise drawn on the device), same physics; ``--repeats`` rounds of these rows
+  and the numpy row, with the median of the per-round ratios;
 * on CUDA, when a GPU is present: the torch episode layer at B = 4,096 ... 1,048,576
   (``--batches``, eager with host noise, and compiled with counter noise), and VMAS
   ``simple_spread`` and ``navigation`` (N = 5 agents) at the same B when ``vmas`` is installed.
@@ -29,7 +30,8 @@ Without a GPU it says so and measures the CPU rows only. ``--parts`` picks the t
 are always measured), e.g. the CPU rows in one process and the CUDA rows in another, at the same
 time on a many-core machine.
 
-    python benchmarks/bench_gpu.py [--scenario paper] [--seconds 3] [--batches 4096 65536 262144]
+    python benchmarks/bench_gpu.py [--scenario paper] [--seconds 3] [--repeats 3]
+                                   [--batches 4096 65536 262144]
                                    [--dmpc-batch 100] [--dmpc-steps 10] [--reproduce-seeds 100]
                                    [--parts env trainer dmpc cpu cuda] [--trainer-copies 128 4096]
 """
@@ -229,36 +231,51 @@ def dmpc_rows(args, parts: set[str], cuda: bool) -> None:
 
 def episode_rows(args, scenario, parts: set[str], torch) -> None:
     """The episode layer's table (env-steps/s, ratio to numpy at ``--cpu-batch``), a row printed
-    as soon as it is measured."""
-    reference = episode_rate(scenario, args.cpu_batch, args.seconds, "numpy")
-    print(f"\nscenario {scenario.name!r}, N = {scenario.n_uav}, {args.seconds:.1f} s per row\n")
-    print(f"| backend | B | env-steps/s | vs numpy B={args.cpu_batch} |")
+    as soon as it is measured. The CPU rows at ``--cpu-batch`` are measured in ``--repeats``
+    rounds, numpy first in each: the median of each row, and the median of its per-round ratios
+    to numpy (the load of a shared machine moves both alike)."""
+    batch = args.cpu_batch
+    cases = [("numpy", "numpy", False, "generator")]
+    if torch is not None and "cpu" in parts:
+        cases += [
+            ("torch cpu (1 thread)", "torch", False, "generator"),
+            ("torch cpu (1 thread), compiled", "torch", True, "generator"),
+            ("torch cpu (1 thread), compiled, counter noise", "torch", True, "counter"),
+        ]
+    rounds = []
+    for _ in range(args.repeats):
+        rounds.append(
+            [
+                episode_rate(scenario, batch, args.seconds, backend, "cpu", compile_, noise)
+                for _, backend, compile_, noise in cases
+            ]
+        )
+    reference = float(np.median([r[0] for r in rounds]))
+    print(f"\nscenario {scenario.name!r}, N = {scenario.n_uav}, {args.seconds:.1f} s per row")
+    print(f"{args.repeats} rounds; the ratio is the median of the per-round ratios\n")
+    print(f"| backend | B | env-steps/s | vs numpy B={batch} |")
     print("|---|---:|---:|---:|")
 
-    def row(name: str, batch: int, rate: float | None) -> None:
-        figure = "not installed | " if rate is None else f"{rate:,.0f} | {rate / reference:.2f}x"
-        print(f"| {name} | {batch} | {figure} |", flush=True)
+    def row(name: str, size: int, rate: float | None, ratio: float | None = None) -> None:
+        if rate is None:
+            print(f"| {name} | {size} | not installed | |", flush=True)
+            return
+        ratio = rate / reference if ratio is None else ratio
+        print(f"| {name} | {size} | {rate:,.0f} | {ratio:.2f}x |", flush=True)
 
     if "cpu" in parts:
         row("numpy", 1, episode_rate(scenario, 1, args.seconds, "numpy"))
-    row("numpy", args.cpu_batch, reference)
-    if torch is not None and "cpu" in parts:
-        for label, compile_, noise in (
-            ("", False, "generator"),
-            (", compiled", True, "generator"),
-            (", compiled, counter noise", True, "counter"),
-        ):
-            rate = episode_rate(
-                scenario, args.cpu_batch, args.seconds, "torch", "cpu", compile_, noise
-            )
-            row("torch cpu (1 thread)" + label, args.cpu_batch, rate)
+    for k, (label, *_) in enumerate(cases):
+        rates = [r[k] for r in rounds]
+        ratio = float(np.median([r[k] / r[0] for r in rounds]))
+        row(label, batch, float(np.median(rates)), ratio)
     if torch is not None and "cuda" in parts and torch.cuda.is_available():
-        for batch in args.batches:
+        for size in args.batches:
             for compile_, noise in ((False, "generator"), (True, "counter")):
-                rate = episode_rate(scenario, batch, args.seconds, "torch", "cuda", compile_, noise)
-                row("torch cuda" + (", compiled, counter noise" if compile_ else ""), batch, rate)
+                rate = episode_rate(scenario, size, args.seconds, "torch", "cuda", compile_, noise)
+                row("torch cuda" + (", compiled, counter noise" if compile_ else ""), size, rate)
             for name in ("simple_spread", "navigation"):
-                row(f"vmas {name}", batch, vmas_rate(name, batch, args.seconds, "cuda"))
+                row(f"vmas {name}", size, vmas_rate(name, size, args.seconds, "cuda"))
     elif "cuda" in parts:
         print("no CUDA device: the GPU rows (torch cuda, VMAS) are not measured")
 
@@ -271,6 +288,7 @@ def main() -> None:
     parser.add_argument("--scenario", default="paper")
     parser.add_argument("--seconds", type=float, default=3.0, help="per measurement")
     parser.add_argument("--cpu-batch", type=int, default=4096)
+    parser.add_argument("--repeats", type=int, default=3, help="rounds of the CPU rows")
     parser.add_argument("--batches", type=int, nargs="+", default=[4096, 65536, 262144, 1048576])
     parser.add_argument("--dmpc-batch", type=int, default=100, help="copies of the DMPC rows")
     parser.add_argument("--dmpc-steps", type=int, default=10, help="control steps per DMPC row")

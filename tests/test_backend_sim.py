@@ -7,6 +7,7 @@ backends, so every state, cost and output must agree to 1e-9 (relative), at ever
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import fields, is_dataclass
 
 import numpy as np
@@ -14,6 +15,7 @@ import pytest
 
 from uav_formation_env.config_io import paper_scenario
 from uav_formation_env.core.array_api import to_numpy
+from uav_formation_env.episode import FormationEpisodes
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.scenarios import random_fields_scenario, random_routes_scenario
 from uav_formation_env.sim import FormationSim
@@ -92,32 +94,64 @@ def test_backend_and_device_are_checked():
         FormationSim(scenario, options="torch")
 
 
-def test_compiled_observer_step_equals_the_eager_one(monkeypatch) -> None:
-    """SimOptions(compile=True): the observer's ticks through torch.compile give the eager
-    numbers (to rounding); where compilation fails, one warning and the eager loop."""
-    from uav_formation_env.core import observer
+def fly_episodes(options: SimOptions, steps: int) -> list[list[np.ndarray]]:
+    """The episode layer of the paper scenario, 3 copies with autoreset, zero actions (the
+    formation flies straight into O1, so avoidance runs), as numpy per step: the observations,
+    rewards, flags and the simulator's result and topology state."""
+    episodes = FormationEpisodes(paper_scenario(), 3, autoreset=True, options=options)
+    episodes.reset(seed=[1, 2, 3])
+    zeros = torch.zeros((3, 5, 3), dtype=torch.float64)
+    flown = []
+    for _ in range(steps):
+        step = episodes.step(zeros)
+        arrays = [step.observation, step.reward, step.terminated, step.truncated]
+        arrays += [getattr(step.result, f.name) for f in fields(step.result) if f.name != "cost"]
+        arrays += [getattr(step.result.cost, f.name) for f in fields(step.result.cost)]
+        topology = episodes.sim.topology
+        arrays += [getattr(topology, f.name) for f in fields(topology)]
+        flown.append([to_numpy(a).copy() for a in arrays])
+    return flown
 
-    scenario = paper_scenario()
-    runs = []
-    for compile_ in (False, True):
-        sim = FormationSim(scenario, 3, options=SimOptions("torch", compile=compile_))
-        sim.reset(seed=[1, 2, 3])
-        states = [to_numpy(sim.step(torch.full((3, 5, 3), 0.5, dtype=torch.float64)).z).copy()]
-        for _ in range(4):
-            states.append(to_numpy(sim.step(torch.zeros((3, 5, 3), dtype=torch.float64)).z))
-        runs.append((np.stack(states), to_numpy(sim.observer.d_hat)))
-    np.testing.assert_allclose(runs[1][0], runs[0][0], rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(runs[1][1], runs[0][1], rtol=1e-10, atol=1e-12)
 
-    def broken(*args, **kwargs):
-        raise RuntimeError("no compiler here")
+def test_compiled_step_equals_the_eager_one(monkeypatch) -> None:
+    """SimOptions(compile=True): the whole step (the simulator's and the episode layer's)
+    through torch.compile gives the eager numbers (to rounding) over 80 steps that include an
+    avoidance, and over 10 steps with counter noise; where compilation fails, one warning each
+    and the eager step."""
+    from uav_formation_env.core import array_api
 
-    monkeypatch.setattr(observer, "_COMPILED_HELD", [broken])
-    sim = FormationSim(scenario, 3, options=SimOptions("torch", compile=True))
-    sim.reset(seed=[1, 2, 3])
-    with pytest.warns(RuntimeWarning, match="torch.compile of the observer step failed"):
-        z = sim.step(torch.full((3, 5, 3), 0.5, dtype=torch.float64)).z
-    np.testing.assert_allclose(to_numpy(z), runs[0][0][0], rtol=1e-12, atol=1e-12)
+    eager = fly_episodes(SimOptions("torch"), 80)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # compiled, not the eager fallback
+        compiled = fly_episodes(SimOptions("torch", compile=True), 80)
+    avoiding = [k for k, step in enumerate(eager) if step[4 + 9].any()]  # result.avoiding
+    assert avoiding, "no avoidance in the compared steps"
+    # counter noise: drawn inside the compiled step
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        counter = fly_episodes(SimOptions("torch", compile=True, noise="counter"), 10)
+    counter_eager = fly_episodes(SimOptions("torch", noise="counter"), 10)
+    for name, (first, second) in {
+        "": (eager, compiled),
+        "counter": (counter_eager, counter),
+    }.items():
+        for k, (a, b) in enumerate(zip(first, second)):
+            for x, y in zip(a, b):
+                assert x.dtype == y.dtype
+                message = f"{name} step {k}"
+                np.testing.assert_allclose(y, x, rtol=1e-12, atol=1e-12, err_msg=message)
+
+    def broken(function):
+        def fail(*args):
+            raise RuntimeError("no compiler here")
+
+        return fail
+
+    monkeypatch.setattr(array_api, "torch_compiled", broken)
+    with pytest.warns(RuntimeWarning, match="torch.compile of FormationSim._advance failed"):
+        fallback = fly_episodes(SimOptions("torch", compile=True), 2)
+    for x, y in zip(eager[1], fallback[1]):
+        np.testing.assert_array_equal(y, x)
     with pytest.raises(ValueError, match="compile=True needs backend='torch'"):
         SimOptions(compile=True)
 

@@ -96,8 +96,9 @@ def test_bad_arguments_are_named():
 
 
 def test_compiled_env_passes_the_spec_check() -> None:
-    """torchrl_env(compile=True): the observer's ticks through torch.compile (3 copies: the
-    shapes test_backend_sim compiles for) and the same specs."""
+    """torchrl_env(compile=True): the whole step through torch.compile (3 copies: the shapes
+    test_backend_sim compiles for) and the same specs."""
     env = envs.torchrl_env(num_envs=3, compile=True, seed=0)
-    assert env.episodes.sim._observer_held.__name__ == "compiled_observer_step_held"
+    assert env.episodes.sim.options.compile
     check_env_specs(env)
+    assert env.episodes.sim._compiled and env.episodes._compiled  # both compiled, in use

@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
+from uav_formation_env.core.array_api import call_compiled, may_hold, namespace, to_numpy
 from uav_formation_env.core.array_api import copy as copy_array
-from uav_formation_env.core.array_api import namespace, to_numpy
 from uav_formation_env.core.cost import anchored
 from uav_formation_env.core.dynamics import velocity_setpoint_input
 from uav_formation_env.core.local_observation import (
@@ -309,6 +309,12 @@ class FormationEpisodes:
         self._episode_start = copy_array(self.sim.steps)  # (B,) sim step of each episode's start
         self._no_copy = self._constant(np.zeros(self.batch_size, dtype=bool))
         self._no_penalty = self._constant(np.zeros((self.batch_size, self.n_uav)))
+        self._compiled: list = []  # SimOptions.compile: _judge through torch.compile
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_compiled"] = []  # a compiled function does not pickle; compiled again on use
+        return state
 
     @property
     def xp(self) -> ModuleType:
@@ -412,10 +418,30 @@ class FormationEpisodes:
 
     def _step(self, clipped: np.ndarray) -> EpisodeStep:
         result = self.sim.step(self._input(clipped))
+        if self.sim.options.compile:  # the rules and observations as one graph
+            step = call_compiled(self._compiled, self._judge, result)
+        else:
+            step = self._judge(result)
+        if self.autoreset and (done := step.done).any():
+            step.final_observation = step.observation
+            step.reset = done
+            fresh = self.reset(seed=None, mask=done)
+            xp = self.xp
+            step.observation = xp.where(done[:, None, None], fresh.observation, step.observation)
+            if step.neighbour_index is not None:
+                step.neighbour_index = xp.where(
+                    done[:, None, None], fresh.neighbour_index, step.neighbour_index
+                )
+        self.last = step
+        return step
+
+    def _judge(self, result: StepResult) -> EpisodeStep:
+        """What the simulator's step ``result`` means to the agents: observations, rewards and
+        the ending flags (before any autoreset)."""
         cost = result.cost.total
         penalty = self.penalties(result)
         left = self._left_corridor(result) if self._corridor else self._no_copy
-        if self._corridor and left.any() and self.scenario.episode.corridor_penalty > 0:
+        if self._corridor and may_hold(left) and self.scenario.episode.corridor_penalty > 0:
             left_now = self.xp.astype(left[:, None], cost.dtype)  # torch: bool * float is float32
             penalty = penalty + self.scenario.episode.corridor_penalty * left_now
         terminated = left | result.collision.any(axis=1) if self._end_on_collision else left
@@ -435,7 +461,7 @@ class FormationEpisodes:
             reward = training_reward(terms, terminated, penalty_end)
         else:
             reward = self.reward(cost, penalty)
-        step = EpisodeStep(
+        return EpisodeStep(
             observation=obs,
             reward=reward,
             cost=cost,
@@ -448,18 +474,6 @@ class FormationEpisodes:
             neighbour_index=neighbour_index,
             terms=terms,
         )
-        if self.autoreset and (done := step.done).any():
-            step.final_observation = step.observation
-            step.reset = done
-            fresh = self.reset(seed=None, mask=done)
-            xp = self.xp
-            step.observation = xp.where(done[:, None, None], fresh.observation, step.observation)
-            if neighbour_index is not None:
-                step.neighbour_index = xp.where(
-                    done[:, None, None], fresh.neighbour_index, neighbour_index
-                )
-        self.last = step
-        return step
 
     # ------------------------------------------------------------------ start along the mission
     def _start_steps(self, reset: np.ndarray) -> np.ndarray:

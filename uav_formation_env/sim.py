@@ -41,6 +41,7 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.core import counter_rng, topology
 from uav_formation_env.core.array_api import (
     amin,
+    call_compiled,
     device,
     namespace,
     namespace_of_backend,
@@ -54,7 +55,6 @@ from uav_formation_env.core.initial import formation_positions, initial_position
 from uav_formation_env.core.observer import (
     ObserverState,
     compensation,
-    compiled_observer_step_held,
     disturbance_estimate,
     observer_init,
     observer_step_held,
@@ -230,9 +230,6 @@ class FormationSim:
             raise TypeError(f"options must be a SimOptions, got {type(options).__name__}")
         self.options = options
         self.noise_source = options.noise
-        # the observer's S ticks, the bulk of a step's arithmetic, through torch.compile
-        held = compiled_observer_step_held if options.compile else observer_step_held
-        self._observer_held = held
         self.backend = options.backend
         self.device = options.resolved_device()
         self.scenario = scenario
@@ -290,6 +287,13 @@ class FormationSim:
             self.topology = self._put_fields(self.topology)
         # the compiled step of the same numbers (fast_step.py), where it applies
         self.fast_path = fast_step.attach(self, StepResult)
+        # SimOptions.compile: _advance through torch.compile, built at the first step
+        self._compiled: list = []
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_compiled"] = []  # a compiled function does not pickle; compiled again on use
+        return state
 
     # ------------------------------------------------------------------ backend
     def _put(self, values):
@@ -386,16 +390,18 @@ class FormationSim:
         self.observer = _where_batch(on, observer_init(self.z[..., 3:]), self.observer)
         self.topology = topology.reset_topology(self.topology, on)
         zeros = self.xp.zeros((B, N, 3), dtype=self.z.dtype, device=self.device)
-        result = self._finish(on, zeros, zeros, zeros, zeros)
+        result = self._finish(on, (zeros, zeros, zeros, zeros))
         if self.last is not None and not mask.all():
             result = _where_batch(on, result, self.last)
         self.last = result
         return result
 
-    def _check_observer(self) -> None:
-        """A ``ValueError`` naming ``observer.substeps`` where the estimate is not finite."""
+    def _check_observer(self, observer: ObserverState | None = None) -> None:
+        """A ``ValueError`` naming ``observer.substeps`` where the estimate of ``observer`` (None:
+        the simulator's) is not finite."""
         obs_cfg = self.scenario.observer
-        if obs_cfg.enabled and not bool(self.xp.isfinite(self.observer.d_hat).all()):
+        observer = self.observer if observer is None else observer
+        if obs_cfg.enabled and not bool(self.xp.isfinite(observer.d_hat).all()):
             raise ValueError(
                 f"the observer diverged (non-finite estimate at t = {float(self.t.max()):g} "
                 f"s): its tick dynamics.dt / observer.substeps = {self.dt / obs_cfg.substeps:g}"
@@ -439,29 +445,61 @@ class FormationSim:
             result = self.fast_path.step(u_n)
             self._check_observer()
             return result
-        obs_cfg = self.scenario.observer
+        # host noise blocks are read here; counter draws are computed inside the step
+        noise = None if self.noise_source == "counter" else self._step_noise()
+        if self.options.compile:  # the whole step as one graph of torch.compile
+            # one memory layout of every input from step to step (no recompilation), and the
+            # velocities apart from the positions (the compiled loops vectorise contiguous arrays)
+            self.topology = replace(
+                self.topology,
+                **{
+                    f.name: getattr(self.topology, f.name).contiguous()
+                    for f in fields(self.topology)
+                },
+            )
+            velocity = self.z[..., 3:].contiguous()
+            outcome = call_compiled(self._compiled, self._advance, u_n, noise, velocity)
+        else:
+            outcome = self._advance(u_n, noise)
+        z, gust, observer, steps, t, new_topology, result, pair = outcome
+        if self.scenario.observer.enabled:
+            self._check_observer(observer)
+        self.z, self.gust, self.observer, self.steps, self.t = z, gust, observer, steps, t
+        self.topology, self._pair_of = new_topology, (result.z, pair)
+        self._advance_noise()
+        self.last = result
+        return result
+
+    def _advance(self, u_n, noise=None, velocity=None) -> tuple:
+        """One control step from the current state, which it leaves unchanged: the new state
+        ``(z, gust, observer, steps, t, topology)``, the :class:`StepResult` and the pair
+        distances of the new positions.
+
+        Args:
+            u_n: (B, N, 3) formation input [m/s^2].
+            noise: (B, N, noise_dim) the step's standard noise; None: :meth:`_step_noise`.
+            velocity: the velocities of the state (B, N, 3) [m/s] as a contiguous array (the
+                compiled step's loops vectorise those only); None: read from the state.
+        """
+        xp, obs_cfg = self.xp, self.scenario.observer
+        noise = self._step_noise() if noise is None else noise
         # minimum(maximum(.)) is clip for finite values, without numpy's Python wrappers
         u_max = self.u_max
         u_n = xp.minimum(xp.maximum(u_n, -u_max), u_max)
         u_d = compensation(self.observer, obs_cfg) if obs_cfg.enabled else xp.zeros_like(u_n)
         u = xp.minimum(xp.maximum(u_n + u_d, -u_max), u_max)
-        noise = self._step_noise()
-        d, self.gust = self.disturbance.evaluate(self.t, noise, self.gust, self.copy_disturbance)
+        d, gust = self.disturbance.evaluate(self.t, noise, self.gust, self.copy_disturbance)
         a = u + d
+        observer = self.observer
         if obs_cfg.enabled:
-            self.observer = self._observer_held(
-                self.observer, self.z[..., 3:], a, u, self.dt, obs_cfg
-            )
-            self._check_observer()
-        self.z = zoh_step(self.z, a, self.dt)
-        self.steps += 1
+            v0 = self.z[..., 3:] if velocity is None else velocity
+            observer = observer_step_held(observer, v0, a, u, self.dt, obs_cfg)
+        z = zoh_step(self.z, a, self.dt)
+        steps = self.steps + 1
         # steps x dt: no drift from repeated addition (torch: int x float would be float32)
-        steps = self.steps if self.backend == "numpy" else self.xp.astype(self.steps, self.z.dtype)
-        self.t = steps * self.dt
-        self._advance_noise()
-        result = self._finish(None, u_n, u_d, u, d)
-        self.last = result
-        return result
+        t = (steps if self.backend == "numpy" else xp.astype(steps, z.dtype)) * self.dt
+        new_topology, result, pair = self._outcome(z, t, steps, observer, (u_n, u_d, u, d))
+        return z, gust, observer, steps, t, new_topology, result, pair
 
     def _step_noise(self):
         """(B, N, noise_dim) the standard noise of this step: from the host blocks, or counter
@@ -494,40 +532,41 @@ class FormationSim:
                 self.noise_pos[b] = 0
             self._noise_left = NOISE_BLOCK - int(self.noise_pos.max())
 
-    def _finish(
-        self,
-        mask: np.ndarray | None,
-        u_n: np.ndarray,
-        u_d: np.ndarray,
-        u: np.ndarray,
-        d: np.ndarray,
-    ) -> StepResult:
-        """Topology update at the current time (only in ``mask`` copies; None: all), costs and
-        distances."""
-        cfg = self.scenario
-        new_topology, out = topology.update_topology(
-            self.topology,
-            self.z[..., :3],
-            self.z[..., 3:],
-            self.t,
-            cfg.avoidance,
-            self.schedule,
-            self.base_adjacency,
-            self.obstacles,
-            self.route_start,
+    def _finish(self, mask, inputs: tuple) -> StepResult:
+        """The result of the current state (after a reset of the ``mask`` copies): topology
+        update, costs and distances; ``inputs``: ``(u_n, u_d, u, d)``, each (B, N, 3)."""
+        new_topology, result, pair = self._outcome(
+            self.z, self.t, self.steps, self.observer, inputs
         )
         self.topology = (
             new_topology
             if mask is None or mask.all()
             else _where_batch(mask, new_topology, self.topology)
         )
-        pair, separation, obstacle_distance, cost, collision, estimate = measure_state(
-            self.scenario, self.z, self.observer, u_n, out, self.offsets, self.obstacles
+        self._pair_of = (result.z, pair)
+        return result
+
+    def _outcome(self, z, t, steps, observer: ObserverState, inputs: tuple) -> tuple:
+        """The topology update at states ``z`` (B, N, 6) and time ``t`` (B,) [s], and what they
+        measure: ``(topology, StepResult, pair distances)``; ``inputs``: ``(u_n, u_d, u, d)``."""
+        cfg = self.scenario
+        u_n, u_d, u, d = inputs
+        new_topology, out = topology.update_topology(
+            self.topology,
+            z[..., :3],
+            z[..., 3:],
+            t,
+            cfg.avoidance,
+            self.schedule,
+            self.base_adjacency,
+            self.obstacles,
+            self.route_start,
         )
-        z = copy_array(self.z)
-        self._pair_of = (z, pair)
-        return StepResult(
-            z=z,
+        pair, separation, obstacle_distance, cost, collision, estimate = measure_state(
+            cfg, z, observer, u_n, out, self.offsets, self.obstacles
+        )
+        result = StepResult(
+            z=copy_array(z),
             u_n=u_n,
             u_d=u_d,
             u_applied=u,
@@ -538,9 +577,9 @@ class FormationSim:
             reference_velocity=out.reference_velocity,
             avoiding=out.avoiding,
             cost=cost,
-            t=copy_array(self.t),
-            step=copy_array(self.steps),
-            truncated=self.steps >= self._n_steps,
+            t=copy_array(t),
+            step=copy_array(steps),
+            truncated=steps >= self._n_steps,
             min_separation=separation,
             obstacle_distance=obstacle_distance,
             collision=collision,
@@ -548,6 +587,7 @@ class FormationSim:
             restored=out.restored,
             route_correction=out.route_correction,
         )
+        return new_topology, result, pair
 
     # ------------------------------------------------------------------ copies
     def adopt(self, mask: np.ndarray, source: FormationSim) -> StepResult:

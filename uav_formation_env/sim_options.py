@@ -23,9 +23,11 @@ class SimOptions:
         backend: ``"numpy"`` or ``"torch"``, the library of the state (float64 on both).
         device: where a torch state lives (``"cpu"``, ``"cuda"``, ...; None: the CPU); numpy runs
             on ``"cpu"`` only.
-        compile: the observer's inner ticks through ``torch.compile`` (torch only; the first step
-            compiles; falls back to the eager loop with a warning where compilation is not
-            available; :func:`~uav_formation_env.core.observer.compiled_observer_step_held`).
+        compile: the whole step through ``torch.compile``, as two graphs: the simulator's
+            (:meth:`~uav_formation_env.sim.FormationSim._advance`: dynamics, disturbance,
+            observer, topology, cost) and the episode layer's (observations, rewards, flags).
+            torch only; the first step compiles; where compilation fails, one warning and the
+            eager step (the same numbers to rounding).
         noise: the disturbance noise, ``"generator"`` (blocks from each copy's numpy generator,
             moved to the device: the paper reproduction's numbers) or ``"counter"`` (counter-based
             draws on the device, keyed by each copy's seed and counted by its step; a seed names

@@ -38,6 +38,7 @@ from uav_formation_env.core.array_api import (
     float_dtype,
     is_numpy,
     namespace,
+    read_only,
 )
 
 _NUMPY = (np.ndarray, np.generic, float, int, list, tuple)  # times np.asarray takes
@@ -48,7 +49,7 @@ def _signed_amplitude(n_uav: int, amplitude: float) -> np.ndarray:
     """(N, 1) ``A (-1)^i`` (i 1-based) of eq. 21 [m/s^2], cached and read-only."""
     sign = np.where(np.arange(1, n_uav + 1) % 2 == 1, -1.0, 1.0)
     signed = amplitude * sign[:, None]
-    signed.flags.writeable = False
+    read_only(signed)
     return signed
 
 

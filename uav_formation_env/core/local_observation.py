@@ -28,6 +28,7 @@ from uav_formation_env.core.array_api import (
     einsum_in,
     is_numpy,
     namespace_of,
+    read_only,
     subtract_into,
 )
 from uav_formation_env.core.cost import anchored
@@ -98,8 +99,7 @@ def _layout(k: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     so[:, 1:5] = DISTANCE_SCALE
     lo[:, [1, 2, 4]], ho[:, [1, 2, 4]] = -DISTANCE_CLIP, DISTANCE_CLIP  # centre, surface
     lo[:, 3] = 0.0  # radius
-    for array in (scale, low, high):
-        array.flags.writeable = False
+    read_only(scale, low, high)
     return scale, low, high
 
 

@@ -17,13 +17,12 @@ tick of length ``h`` (finite-difference form, docs/model.md §3.3), elementwise:
 Array-API functions: numpy arrays or torch tensors (core/array_api.py). numpy inputs take the
 compiled kernel of :mod:`~uav_formation_env.core.observer_kernel` when numba is installed, or a
 numpy loop with preallocated buffers; torch inputs take the array-API loop of the same arithmetic
-(the same operations in the same order, so float64 gives the numpy numbers), eagerly or through
-``torch.compile`` (:func:`compiled_observer_step_held`, ``FormationSim(compile=True)``).
+(the same operations in the same order, so float64 gives the numpy numbers), eagerly or inside
+the simulator's compiled step (``SimOptions(compile=True)``).
 """
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any
@@ -32,7 +31,7 @@ import numpy as np
 
 from uav_formation_env.config import ObserverConfig
 from uav_formation_env.core import observer_kernel
-from uav_formation_env.core.array_api import copy, device, is_numpy, namespace, torch_compiled
+from uav_formation_env.core.array_api import copy, device, is_numpy, namespace
 
 
 @dataclass
@@ -247,49 +246,6 @@ def observer_step_held(
         bool(c.lambda1 == 2.0 and c.lambda2 == 1.5),
     )
     return new
-
-
-def _held_arrays(
-    v_hat: Any, s0: Any, d_hat: Any, e_prev: Any, v0: Any, accel: Any, u_applied: Any,
-    dt: float, config: ObserverConfig,
-) -> tuple[Any, Any, Any, Any]:  # fmt: skip
-    """:func:`observer_step_held` on the array loop, state in and out as four arrays (the form
-    ``torch.compile`` traces)."""
-    ticks = tick_velocities(v0, accel, dt, config.substeps)
-    state = ObserverState(v_hat, s0, d_hat, e_prev)
-    new = observer_step(state, ticks, u_applied, dt / config.substeps, config)
-    return new.v_hat, new.s0, new.d_hat, new.e_prev
-
-
-_COMPILED_HELD: list[Any] = []  # the torch.compile'd _held_arrays, or _held_arrays after a failure
-
-
-def compiled_observer_step_held(
-    state: ObserverState, v0: Any, accel: Any, u_applied: Any, dt: float, config: ObserverConfig
-) -> ObserverState:
-    """:func:`observer_step_held` of torch tensors through ``torch.compile``: the S ticks of
-    elementwise operations fused into a few kernels (measured on the CPU, B = 4,096, N = 5:
-    14 ms against 54 ms a step eager, equal to 2e-19; the first call compiles for ~25 s).
-
-    Falls back, with one warning, to the eager loop when compilation is not available (no C++
-    compiler, an unsupported platform); the numbers are then the eager ones.
-    """
-    if not _COMPILED_HELD:
-        _COMPILED_HELD.append(torch_compiled(_held_arrays))
-    arrays = (state.v_hat, state.s0, state.d_hat, state.e_prev, v0, accel, u_applied)
-    try:
-        return ObserverState(*_COMPILED_HELD[0](*arrays, dt, config))
-    except Exception as error:  # noqa: BLE001 - any compiler failure: run eagerly instead
-        if _COMPILED_HELD[0] is _held_arrays:
-            raise  # the eager loop itself failed: a real error
-        warnings.warn(
-            f"torch.compile of the observer step failed ({type(error).__name__}: {error}); "
-            "running it eagerly",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        _COMPILED_HELD[0] = _held_arrays
-        return ObserverState(*_held_arrays(*arrays, dt, config))
 
 
 def disturbance_estimate(state: ObserverState, config: ObserverConfig) -> Any:

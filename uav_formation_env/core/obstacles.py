@@ -34,6 +34,7 @@ from uav_formation_env.core.array_api import (
     device,
     is_numpy,
     namespace_of,
+    read_only,
     to_numpy,
 )
 from uav_formation_env.core.reference import config_cache
@@ -185,8 +186,7 @@ def obstacle_arrays(avoidance: AvoidanceConfig) -> tuple[np.ndarray, np.ndarray,
         radii + avoidance.safety_margin,
         radii + avoidance.detection_margin,
     )
-    for array in arrays:
-        array.flags.writeable = False
+    read_only(*arrays)
     return arrays
 
 
@@ -194,7 +194,7 @@ def obstacle_arrays(avoidance: AvoidanceConfig) -> tuple[np.ndarray, np.ndarray,
 def detection_sq(avoidance: AvoidanceConfig) -> np.ndarray:
     """(O,) squared detection radii (d^o)² [m²], cached and read-only."""
     squared = obstacle_arrays(avoidance)[2] ** 2
-    squared.flags.writeable = False
+    read_only(squared)
     return squared
 
 

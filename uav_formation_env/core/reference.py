@@ -29,8 +29,10 @@ from uav_formation_env.core.array_api import (
     constant_like,
     device,
     is_numpy,
+    is_tracing,
     namespace,
     namespace_of,
+    read_only,
     take,
 )
 
@@ -70,6 +72,8 @@ def config_cache(function: Callable[[_Config], _Value]) -> Callable[[_Config], _
 
     @wraps(function)
     def cached(config: _Config) -> _Value:
+        if is_tracing():  # torch.compile would replay the store with a value of its graph
+            return function(config)
         hit = by_id.get(id(config))
         if hit is not None and hit[0] is config:
             return hit[1]
@@ -91,8 +95,7 @@ def schedule_arrays(schedule: ScheduleConfig) -> tuple[np.ndarray, np.ndarray]:
     """
     times = np.asarray(schedule.times, dtype=float)
     velocities = np.asarray(schedule.velocities, dtype=float).reshape(-1, 3)
-    times.flags.writeable = False
-    velocities.flags.writeable = False
+    read_only(times, velocities)
     return times, velocities
 
 

@@ -32,6 +32,7 @@ from uav_formation_env.core.array_api import (
     device,
     float_dtype,
     is_numpy,
+    may_hold,
     move_batch_first,
     move_batch_last,
     namespace_of,
@@ -243,15 +244,15 @@ def update_topology(
     field = _field_arrays(xp, avoidance, obstacles, positions)
     centres, r_safe, r_detect_sq, present, fast_centres, r_safe_b, r_detect_b = field
     turn = _turn_geometry(avoidance, schedule, t, positions, preset, centres, r_safe_b)
-    if turn is None and not (state.status == ACTIVE).any():
+    if turn is None and not may_hold(state.status == ACTIVE):
         # Fast exit for most steps: nothing active and no UAV within any idle obstacle's
         # detection radius, so nothing can activate (activation needs min_i D_i < d^o).
         rel = positions[:, :, None, :2] - fast_centres
         armed = _armed(state.status, avoidance.rearm)
         # (B, O); padding is far
         detected = amin((rel**2).sum(axis=-1), axis=1) < r_detect_sq
-        if not (detected & armed).any():
-            if correction is not None and detected.any():  # see the route return below
+        if not may_hold(detected & armed):
+            if correction is not None and may_hold(detected):  # see the route return below
                 correction = xp.where(detected.any(axis=1)[:, None], 0.0, correction)
                 base = smooth + correction
             return _copy_state(state), _idle_output(xp, base, h0, batch, n_uav, n_obs, correction)
@@ -261,7 +262,7 @@ def update_topology(
     if turn is not None:  # in range along the next leg, from the positions at the turn
         near_turn, dist_turn, chord_lat, window = turn
 
-    status = move_batch_last(state.status)  # (O, B), modified in place below
+    status = move_batch_last(state.status)  # (O, B)
     side = move_batch_last(state.side)  # (O, N, B)
     guide = move_batch_last(state.guide)  # (O, 2, B)
     ended = move_batch_last(state.ended)  # (O, 2, B)
@@ -278,25 +279,25 @@ def update_topology(
         candidate = candidate | by_turn
         side_lat = xp.where(window, chord_lat, lat)
     activated = _activated(xp, candidate & present, status, min_dist, avoidance, positions)
-    if activated.any():
+    if may_hold(activated):
         new_side, one_group = choose_sides(side_lat, avoidance.split_deadband)
         side = xp.where(activated[:, None], new_side, side)
         case = xp.astype(xp.where(activated, xp.where(one_group, 1, 2), case), xp.int8)
         guide = xp.where(activated[:, None], -1, guide)
         ended = xp.where(activated[:, None], False, ended)
         activation_time = xp.where(activated, t, activation_time)
-        status[activated] = ACTIVE
+        status = xp.where(activated, ACTIVE, status)
 
     # 2. guides and ends
     active = status == ACTIVE  # (O, B)
-    if active.any():
+    if may_hold(active):
         # in range along the current leg or, near a turn, along the next one
         eligible = near if turn is None else near | near_turn
         geometry = (rel_x, rel_y, dist, r_safe if obstacles is None else r_safe_b, e_hat)
         guide, ended = _guides_and_ends(xp, active, side, eligible, geometry, guide, ended)
     restored = active & ended.all(axis=1)  # (O, B)
-    if restored.any():
-        status[restored] = DONE
+    if may_hold(restored):
+        status = xp.where(restored, DONE, status)
         restore_time = xp.where(restored, t, restore_time)
 
     new_state = TopologyState(
@@ -321,7 +322,7 @@ def update_topology(
     output.activated = _contiguous_batch_first(activated)
     output.restored = _contiguous_batch_first(restored)
     active = status == ACTIVE
-    if active.any():
+    if may_hold(active):
         geometry = (rel_x, rel_y, dist, xp.broadcast_to(r_safe_b, (n_obs, 1, batch)))
         _avoidance_output(
             output, active, side, guide, ended, case, geometry, velocities, preset, avoidance
@@ -481,7 +482,7 @@ def _turn_geometry(
     v_next, wait = next_leg(schedule, t)  # (B, 3), (B,)
     turning = ((v_next - preset) ** 2).sum(axis=1) > 1e-12
     window = turning & (wait > 0.0) & (wait <= avoidance.turn_preview)  # (B,)
-    if not window.any():
+    if not may_hold(window):
         return None
     moved = positions + preset[:, None, :] * xp.where(window, wait, 0.0)[:, None, None]
     e_next, _ = heading_frame(v_next)
@@ -633,9 +634,10 @@ def _avoidance_output(
     same = ~differ.any(axis=0) & ~xp.eye(n_uav, dtype=xp.bool, device=at)[:, :, None]
     same = xp.astype(move_batch_first(same), output.adjacency.dtype)  # (B, N, N) 0/1
     if avoidance.split_graph == "complete":
-        output.adjacency[has_active] = same[has_active]
+        output.adjacency = xp.where(has_active[:, None, None], same, output.adjacency)
     else:  # "base": H0's own edges inside each cell (output.adjacency holds H0 here)
-        output.adjacency[has_active] = (output.adjacency * same)[has_active]
+        adjacency = output.adjacency
+        output.adjacency = xp.where(has_active[:, None, None], adjacency * same, adjacency)
     # groups: bit r set when on side -1 of the r-th split (case 2) active obstacle of the copy
     split = active & (case == 2)  # (O, B)
     rank = xp.cumulative_sum(xp.astype(split, xp.int64), axis=0) - 1  # (O, B)
@@ -649,7 +651,7 @@ def _avoidance_output(
     guided = xp.where(minus, follow[:, 1:], follow[:, :1])  # (O, N, B)
     avoiding = guided.any(axis=0)  # (N, B)
     output.avoiding = _contiguous_batch_first(avoiding)
-    if not avoiding.any():
+    if not may_hold(avoiding):
         return
     clearance = xp.where(guided, dist - r_safe, math.inf)  # (O, N, B)
     chosen = _first_argmin(clearance, axis=0)  # (N, B)

@@ -96,8 +96,8 @@ def torchrl_env(
         seed: seed of the first reset.
         return_state: add the global state for centralised critics.
         n_uav: N of a scenario that draws N per reset.
-        compile: the simulator's observer ticks through ``torch.compile`` (falls back to the
-            eager loop with a warning where compilation is not available).
+        compile: the whole step through ``torch.compile`` (falls back to the eager step with a
+            warning where compilation is not available).
         noise: ``"generator"`` (host blocks) or ``"counter"`` (counter-based draws on the
             device) disturbance noise; see :class:`~uav_formation_env.sim.FormationSim`.
         **overrides: scenario fields, as for :func:`parallel_env`.

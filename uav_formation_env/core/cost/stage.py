@@ -21,6 +21,7 @@ from uav_formation_env.core.array_api import (
     einsum_in,
     is_numpy,
     namespace_of,
+    read_only,
 )
 from uav_formation_env.core.proximity import SensedPairs, gap_sq, pair_distances
 
@@ -265,7 +266,7 @@ def obstacle_sq(surface: np.ndarray, margin: float) -> np.ndarray:
 def _not_eye(n_uav: int) -> np.ndarray:
     """(N, N) ``1 - I``, cached and read-only."""
     mask = 1.0 - np.eye(n_uav)
-    mask.flags.writeable = False
+    read_only(mask)
     return mask
 
 
