@@ -118,7 +118,7 @@ def test_compiled_step_equals_the_eager_one(monkeypatch) -> None:
     through torch.compile gives the eager numbers (to rounding) over 80 steps that include an
     avoidance, and over 10 steps with counter noise; where compilation fails, one warning each
     and the eager step."""
-    from uav_formation_env.core import array_api
+    from uav_formation_env.core import tracing
 
     eager = fly_episodes(SimOptions("torch"), 80)
     with warnings.catch_warnings():
@@ -147,7 +147,7 @@ def test_compiled_step_equals_the_eager_one(monkeypatch) -> None:
 
         return fail
 
-    monkeypatch.setattr(array_api, "torch_compiled", broken)
+    monkeypatch.setattr(tracing, "torch_compiled", broken)
     with pytest.warns(RuntimeWarning, match="torch.compile of FormationSim._advance failed"):
         fallback = fly_episodes(SimOptions("torch", compile=True), 2)
     for x, y in zip(eager[1], fallback[1]):

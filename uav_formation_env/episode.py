@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 
 from uav_formation_env.config import Scenario
-from uav_formation_env.core.array_api import call_compiled, may_hold, namespace, to_numpy
 from uav_formation_env.core.array_api import copy as copy_array
+from uav_formation_env.core.array_api import may_hold, namespace, to_numpy
 from uav_formation_env.core.cost import anchored
 from uav_formation_env.core.dynamics import velocity_setpoint_input
 from uav_formation_env.core.local_observation import (
@@ -56,6 +56,7 @@ from uav_formation_env.core.reference import (
     route_error,
     slot_route_offset,
 )
+from uav_formation_env.core.tracing import call_compiled
 from uav_formation_env.core.training_reward import reward_terms, training_reward
 from uav_formation_env.policies.heuristic import consensus_pd
 from uav_formation_env.sim import FormationSim, SeedLike, StepResult

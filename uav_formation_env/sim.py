@@ -41,7 +41,6 @@ from uav_formation_env.config import Scenario
 from uav_formation_env.core import counter_rng, topology
 from uav_formation_env.core.array_api import (
     amin,
-    call_compiled,
     device,
     namespace,
     namespace_of_backend,
@@ -62,6 +61,7 @@ from uav_formation_env.core.observer import (
 from uav_formation_env.core.obstacles import ObstacleField, obstacle_field
 from uav_formation_env.core.proximity import SensedPairs, nearest_distance, uav_pairs
 from uav_formation_env.core.reference import CopySchedules, Schedule, blend_offset, copy_schedules
+from uav_formation_env.core.tracing import call_compiled
 from uav_formation_env.scenes import (
     max_gust_std,
     max_obstacles,

@@ -26,20 +26,23 @@ standard covers):
   :func:`asarray_like`, :func:`as_float`, :func:`constant_like` for cached configuration arrays),
   ``einsum`` (:func:`einsum`, :func:`einsum_in`, :func:`einsum_function`), :func:`take`,
   :func:`add_at`, :func:`amin`, in-place writes (:func:`subtract_into`, :func:`clip_in_place`)
-  and the batch-axis moves. Each numpy-only branch carries its measured reason.
+  and the batch-axis moves. Each numpy-only branch carries its measured reason;
+- what keeps the core traceable by ``torch.compile`` as one graph: :func:`may_hold` for
+  shortcuts taken on the data, :func:`read_only` for cached constants, and while tracing the
+  namespace of :mod:`~uav_formation_env.core.tracing`.
 """
 
 from __future__ import annotations
 
-import warnings
 from types import ModuleType
 from typing import Any
 
 import numpy as np
 
+from uav_formation_env.core.tracing import TracedTorch, is_tracing, traced_einsum, traced_namespace
+
 __all__ = [
     "BACKENDS",
-    "call_compiled",
     "add_at",
     "amin",
     "as_float",
@@ -56,7 +59,6 @@ __all__ = [
     "einsum_in",
     "float_dtype",
     "is_numpy",
-    "is_tracing",
     "may_hold",
     "move_batch_first",
     "move_batch_last",
@@ -68,7 +70,6 @@ __all__ = [
     "subtract_into",
     "take",
     "to_numpy",
-    "torch_compiled",
     "torch_device",
 ]
 
@@ -88,7 +89,7 @@ def namespace(*arrays: Any) -> ModuleType:
     if not others:
         return np
     if is_tracing():
-        return _traced_namespace()
+        return traced_namespace()
     from array_api_compat import array_namespace
 
     return array_namespace(*others)
@@ -117,7 +118,7 @@ def namespace_of_backend(backend: str) -> ModuleType:
                 "or pip install 'uav-formation-env[rl]'"
             ) from error
         if is_tracing():
-            return _traced_namespace()
+            return traced_namespace()
         import array_api_compat.torch as torch_namespace
 
         return torch_namespace
@@ -320,73 +321,6 @@ def may_hold(mask: Any) -> bool:
     return True
 
 
-_IS_COMPILING: list[Any] = []  # torch.compiler.is_dynamo_compiling, once torch_compiled ran
-
-
-def is_tracing() -> bool:
-    """Whether ``torch.compile`` is tracing the caller (False before :func:`torch_compiled`):
-    code with a Python side effect that tracing would replay (a cache store) skips it then."""
-    return bool(_IS_COMPILING) and _IS_COMPILING[0]()
-
-
-class _TracedTorch:
-    """``array_api_compat.torch`` for code that ``torch.compile`` traces: the functions whose
-    compat wrappers promote Python scalars through dtype queries (a graph break each) call
-    torch directly, with the same results; every other name is the compat module's."""
-
-    def __init__(self) -> None:
-        import array_api_compat.torch as compat
-        import torch
-
-        self._compat, self._torch = compat, torch
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._compat, name)
-
-    def where(self, condition: Any, x1: Any, x2: Any) -> Any:
-        return self._torch.where(condition, x1, x2)
-
-    def maximum(self, x1: Any, x2: Any) -> Any:
-        return self._bound(x1, x2, "min", self._torch.maximum)
-
-    def minimum(self, x1: Any, x2: Any) -> Any:
-        return self._bound(x1, x2, "max", self._torch.minimum)
-
-    def _bound(self, x1: Any, x2: Any, side: str, both: Any) -> Any:
-        """``both(x1, x2)``; with a Python number on one side, the other clamped at it."""
-        if isinstance(x2, (int, float)):
-            return self._torch.clamp(x1, **{side: x2})
-        if isinstance(x1, (int, float)):
-            return self._torch.clamp(x2, **{side: x1})
-        return both(x1, x2)
-
-    def astype(self, x: Any, dtype: Any, copy: bool = True, device: Any = None) -> Any:
-        return x.to(dtype=dtype, device=device)
-
-
-_TRACED: list[_TracedTorch] = []
-
-
-def _traced_einsum(subscripts: str, *operands: Any) -> Any:
-    """``torch.einsum`` for traced code, except the product of two operands summed over their
-    last axis (``"...k,...k->..."``): an elementwise product and a sum, which the compiler fuses
-    with their neighbours (rather than a batched matrix product)."""
-    import torch
-
-    inputs, output = subscripts.replace(" ", "").split("->")
-    terms = inputs.split(",")
-    if len(terms) == 2 and terms[0] == terms[1] and terms[0][:-1] == output:
-        first, second = operands
-        return (first * second).sum(dim=-1)
-    return torch.einsum(subscripts, *operands)
-
-
-def _traced_namespace() -> _TracedTorch:
-    if not _TRACED:
-        _TRACED.append(_TracedTorch())
-    return _TRACED[0]
-
-
 def read_only(*arrays: np.ndarray) -> None:
     """Mark cached numpy constants read-only; not while ``torch.compile`` traces (Dynamo turns
     them into constants of the graph and cannot set ndarray flags)."""
@@ -394,41 +328,6 @@ def read_only(*arrays: np.ndarray) -> None:
         return
     for array in arrays:
         array.flags.writeable = False
-
-
-def torch_compiled(function: Any) -> Any:
-    """``torch.compile(function)`` for fixed shapes (compiled lazily, at its first call; the
-    core's one torch import stays in this module)."""
-    namespace_of_backend("torch")  # a clear error if torch is missing
-    import torch
-
-    if not _IS_COMPILING:  # both set before any tracing: a traced check of them is then fixed
-        _IS_COMPILING.append(torch.compiler.is_dynamo_compiling)
-        _traced_namespace()
-    return torch.compile(function, dynamic=False)
-
-
-def call_compiled(slot: list, function: Any, *args: Any) -> Any:
-    """``function(*args)`` through :func:`torch_compiled`, compiled at the first call and kept in
-    ``slot`` (a list, empty or holding it); where compilation fails, one ``RuntimeWarning`` and
-    ``function`` itself from then on (the same numbers, eagerly)."""
-    if not slot:
-        slot.append(torch_compiled(function))
-    try:
-        with warnings.catch_warnings():  # the core's constants are cached: Dynamo says so, once
-            warnings.filterwarnings("ignore", "Dynamo detected a call to a `functools.lru_cache`")
-            return slot[0](*args)
-    except Exception as error:  # noqa: BLE001 - any compiler failure: run eagerly instead
-        if slot[0] == function:
-            raise  # the eager function itself failed: a real error
-        name = getattr(function, "__qualname__", "the step")
-        warnings.warn(
-            f"torch.compile of {name} failed ({type(error).__name__}: {error}); running it eagerly",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-        slot[0] = function
-        return function(*args)
 
 
 def torch_device(device: Any = None) -> Any:
@@ -478,8 +377,8 @@ def einsum_function(xp: ModuleType) -> Any:
     that makes several calls: each then pays no wrapper (:func:`einsum_in` adds one)."""
     if is_numpy(xp):
         return np.einsum
-    if isinstance(xp, _TracedTorch):
-        return _traced_einsum
+    if isinstance(xp, TracedTorch):
+        return traced_einsum
     import torch
 
     return torch.einsum

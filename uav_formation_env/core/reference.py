@@ -29,12 +29,12 @@ from uav_formation_env.core.array_api import (
     constant_like,
     device,
     is_numpy,
-    is_tracing,
     namespace,
     namespace_of,
     read_only,
     take,
 )
+from uav_formation_env.core.tracing import is_tracing
 
 __all__ = [
     "CopySchedules",
