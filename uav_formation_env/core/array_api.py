@@ -6,9 +6,7 @@ function takes arrays, asks :func:`namespace` for their library ``xp`` and calls
 ``xp.concat``, ``xp.cumulative_sum``... The same code then runs on
 
 - **numpy** (the default and the only backend the base install needs). :func:`namespace` returns
-  the ``numpy`` module itself: numpy >= 2.1 implements the standard's names in its main namespace,
-  so the numpy path pays no wrapper (``array_api_compat.numpy`` re-exports the same functions,
-  but its lookup costs time on every call);
+  the ``numpy`` module itself (numpy >= 2.1 has the standard's names): no wrapper on numpy;
 - **torch** on CPU or CUDA, through ``array_api_compat.torch`` (``pip install
   uav-formation-env[rl]``).
 
@@ -26,10 +24,9 @@ standard covers):
   :func:`asarray_like`, :func:`as_float`, :func:`constant_like` for cached configuration arrays),
   ``einsum`` (:func:`einsum`, :func:`einsum_in`, :func:`einsum_function`), :func:`take`,
   :func:`add_at`, :func:`amin`, in-place writes (:func:`subtract_into`, :func:`clip_in_place`)
-  and the batch-axis moves. Each numpy-only branch carries its measured reason;
-- what keeps the core traceable by ``torch.compile`` as one graph: :func:`may_hold` for
-  shortcuts taken on the data, :func:`read_only` for cached constants, and while tracing the
-  namespace of :mod:`~uav_formation_env.core.tracing`.
+  and the batch-axis moves, and what keeps the core one ``torch.compile`` graph (:func:`may_hold`,
+  :func:`read_only`, :mod:`~uav_formation_env.core.tracing`). Each numpy-only branch carries its
+  measured reason.
 """
 
 from __future__ import annotations

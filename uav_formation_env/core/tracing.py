@@ -80,10 +80,7 @@ def traced_namespace() -> TracedTorch:
 def torch_compiled(function: Any) -> Any:
     """``torch.compile(function)`` for fixed shapes (compiled lazily, at its first call; the
     core's one torch import stays in this module)."""
-    from uav_formation_env.core.array_api import namespace_of_backend
-
-    namespace_of_backend("torch")  # a clear error if torch is missing
-    import torch
+    import torch  # here with the torch backend, whose options checked that torch imports
 
     if not _IS_COMPILING:  # both set before any tracing: a traced check of them is then fixed
         _IS_COMPILING.append(torch.compiler.is_dynamo_compiling)
