@@ -462,8 +462,7 @@ class FormationSim:
         else:
             outcome = self._advance(u_n, noise)
         z, gust, observer, steps, t, new_topology, result, pair = outcome
-        if self.scenario.observer.enabled:
-            self._check_observer(observer)
+        self._check_observer(observer)
         self.z, self.gust, self.observer, self.steps, self.t = z, gust, observer, steps, t
         self.topology, self._pair_of = new_topology, (result.z, pair)
         self._advance_noise()
