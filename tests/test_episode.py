@@ -194,8 +194,6 @@ def test_bad_actions_are_refused_by_the_layer() -> None:
         ("reward_scale", 0.0, "episode.reward_scale"),
         ("corridor_width", -1.0, "episode.corridor_width"),
         ("max_velocity_error", -2.0, "episode.max_velocity_error"),
-        ("short_share", 1.5, "episode.short_share"),
-        ("short_cycles", 0, "episode.short_cycles"),
     ],
 )
 def test_episode_options_are_validated(field: str, value, pattern: str) -> None:
@@ -252,37 +250,6 @@ def test_random_start_on_autoreset_and_truncation_at_the_duration() -> None:
     assert step.truncated.tolist() == ended.tolist()  # the duration still ends the episode
     new_start = episodes.sim.steps[ended]
     assert (new_start < PAPER.n_steps).all()  # the next episode started somewhere else again
-
-
-def test_short_episodes_from_t0_are_truncated_after_short_cycles() -> None:
-    """Share 1: every episode from t = 0 ends (truncated, not terminated) after exactly K steps;
-    a staggered start along the mission is never short."""
-    episodes = FormationEpisodes(scenario(start="staggered", short_share=1.0, short_cycles=3), 4)
-    episodes.reset(seed=5)
-    for k in range(1, 4):
-        step = episodes.step(np.zeros((4, 5, 3)))
-        assert step.truncated.tolist() == [k == 3, False, False, False], k
-        assert not step.terminated.any()
-    episodes.reset(seed=5)  # every copy from t = 0 now: all short
-    for _ in range(3):
-        step = episodes.step(np.zeros((4, 5, 3)))
-    assert step.truncated.all()
-
-
-def test_which_episodes_are_short_is_named_by_the_seed_alone() -> None:
-    """Share 0.5 over 40 copies: about half are short, and each copy's draw is the one of its
-    seed run alone; the autoreset draws again."""
-    episodes = FormationEpisodes(scenario(short_share=0.5, short_cycles=2), 40, autoreset=True)
-    episodes.reset(seed=list(range(40)))
-    episodes.step(np.zeros((40, 5, 3)))
-    short = episodes.step(np.zeros((40, 5, 3))).truncated
-    assert 10 <= short.sum() <= 30
-    for b in (int(np.flatnonzero(short)[0]), int(np.flatnonzero(~short)[0])):
-        alone = FormationEpisodes(scenario(short_share=0.5, short_cycles=2), 1)
-        alone.reset(seed=b)
-        alone.step(np.zeros((1, 5, 3)))
-        assert alone.step(np.zeros((1, 5, 3))).truncated[0] == short[b]
-    assert (episodes.sim.steps[short] == 0).all()  # reset to t = 0
 
 
 def test_leaving_the_corridor_costs_the_corridor_penalty() -> None:

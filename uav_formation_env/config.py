@@ -696,9 +696,6 @@ class EpisodeConfig:
       rollouts see both obstacles and every turn.
     - ``max_cycles``: truncate an episode after this many steps from its start (PettingZoo's
       ``max_cycles``); 0 = off, episodes end at ``Scenario.duration``.
-    - Short episodes: an episode that starts at t = 0 is, with probability ``short_share``
-      (drawn from the copy's generator), truncated after ``short_cycles`` steps, so that more
-      of the rollouts form up from the start box; 0 = off.
     """
 
     reward: str = "raw"  # "raw", "scaled" or "log1p"
@@ -716,8 +713,6 @@ class EpisodeConfig:
     velocity_range: float = 10.0  # set-point offset at |a| = 1 [m/s]
     velocity_gain: float = 1.0  # inner-loop gain of the velocity mode [1/s]
     max_cycles: int = 0  # truncate after this many steps of an episode; 0 = off [steps]
-    short_share: float = 0.0  # probability that an episode from t = 0 is short [-]; 0 = off
-    short_cycles: int = 50  # length of a short episode [steps]
 
     def __post_init__(self) -> None:
         _one_of(self.action, ACTION_MODES, "episode.action")
@@ -737,20 +732,6 @@ class EpisodeConfig:
             and self.max_cycles >= 0,
             "episode.max_cycles",
             f"must be an integer >= 0 (0 = off), got {self.max_cycles!r}",
-        )
-        _require(
-            isinstance(self.short_share, int | float)
-            and not isinstance(self.short_share, bool)
-            and 0.0 <= self.short_share <= 1.0,
-            "episode.short_share",
-            f"must be a probability in [0, 1] (0 = off), got {self.short_share!r}",
-        )
-        _require(
-            isinstance(self.short_cycles, int)
-            and not isinstance(self.short_cycles, bool)
-            and self.short_cycles >= 1,
-            "episode.short_cycles",
-            f"must be an integer >= 1 [steps], got {self.short_cycles!r}",
         )
 
 

@@ -307,11 +307,7 @@ class FormationEpisodes:
         self._corridor = episode.corridor_width > 0
         self._divergence = episode.max_formation_error > 0 or episode.max_velocity_error > 0
         self._max_cycles = episode.max_cycles
-        self._short_share = episode.short_share
-        self._limited = bool(self._max_cycles or self._short_share)  # some episodes truncate
         self._episode_start = copy_array(self.sim.steps)  # (B,) sim step of each episode's start
-        # (B,) steps after which each copy's episode is truncated
-        self._cycle_limit = self._constant(np.full(self.batch_size, self._full_length))
         self._no_copy = self._constant(np.zeros(self.batch_size, dtype=bool))
         self._no_penalty = self._constant(np.zeros((self.batch_size, self.n_uav)))
         self._compiled: list = []  # SimOptions.compile: _judge through torch.compile
@@ -342,12 +338,10 @@ class FormationEpisodes:
         starts = self._start_steps(reset)
         if starts.any():
             result = self._fly_to(starts)
-        if self._limited:
-            renewed = self.sim._put(reset)
-            self._episode_start = self.xp.where(renewed, self.sim.steps, self._episode_start)
-            if self._short_share:
-                limits = self.sim._put(self._draw_lengths(reset & (starts == 0)))
-                self._cycle_limit = self.xp.where(renewed, limits, self._cycle_limit)
+        if self._max_cycles:
+            self._episode_start = self.xp.where(
+                self.sim._put(reset), self.sim.steps, self._episode_start
+            )
         zero, no = self._no_penalty, self._no_copy  # a reset rewards nothing and ends nothing
         obs, neighbour_index = encode_observations(self.sim, result)
         step = EpisodeStep(
@@ -453,8 +447,8 @@ class FormationEpisodes:
             penalty = penalty + self.scenario.episode.corridor_penalty * left_now
         terminated = left | result.collision.any(axis=1) if self._end_on_collision else left
         diverged = self._diverged(result) & ~terminated if self._divergence else self._no_copy
-        if self._limited:
-            cycles = (self.sim.steps - self._episode_start) >= self._cycle_limit
+        if self._max_cycles:
+            cycles = (self.sim.steps - self._episode_start) >= self._max_cycles
             truncated = (result.truncated | cycles | diverged) & ~terminated
         elif self._corridor or self._end_on_collision or self._divergence:
             truncated = (result.truncated | diverged) & ~terminated
@@ -481,23 +475,6 @@ class FormationEpisodes:
             neighbour_index=neighbour_index,
             terms=terms,
         )
-
-    @property
-    def _full_length(self) -> int:
-        """Steps after which an episode that is not short is truncated (``max_cycles``, else a
-        bound no episode reaches)."""
-        return self._max_cycles or np.iinfo(np.int64).max
-
-    def _draw_lengths(self, from_zero: np.ndarray) -> np.ndarray:
-        """(B,) int64 step limits of new episodes: ``short_cycles`` with probability
-        ``short_share`` for each copy in ``from_zero`` (a draw from its generator), else the
-        full length."""
-        lengths = np.full(self.batch_size, self._full_length, dtype=np.int64)
-        short = self.scenario.episode.short_cycles
-        for b in np.flatnonzero(from_zero):
-            if self.sim.generator(b).random() < self._short_share:
-                lengths[b] = short
-        return lengths
 
     # ------------------------------------------------------------------ start along the mission
     def _start_steps(self, reset: np.ndarray) -> np.ndarray:
