@@ -42,6 +42,7 @@ from uav_formation_baselines.evaluate import (
     model_path,
     run_scenario,
 )
+from uav_formation_baselines.onpolicy_config import ONPOLICY_ALGOS, load_config
 from uav_formation_env.cli import OneLineParser
 from uav_formation_env.config_io import resolve_scenario, with_overrides
 from uav_formation_env.evaluation import mean_ci95, wilson_ci95, write_json
@@ -49,6 +50,8 @@ from uav_formation_env.tasks import evaluation_scenario, training_scenario
 
 __all__ = ["algorithm_rows", "run_record", "main"]
 
+# settings that do not change what a run learns (the evaluations move a curriculum up: they do)
+_NOT_LEARNING = ("threads",)
 MEASURES = ("realised_cost_mean", "route_error_max_m", "route_error_rms_m", "velocity_rmse_mps")
 
 
@@ -65,13 +68,15 @@ def run_record(run: str | Path) -> dict[str, Any]:
 
 
 def configuration_label(record: dict[str, Any]) -> str:
-    """The row a run belongs to: its algorithm, then the scenario overrides it trained with
-    (``hyperparams.env`` of the in-process trainer, as dotted keys) and the model it started
-    from (``init``), so that runs differing only in their seed share a row; a run's best
-    validation policy (``RUN/best``, with ``selected_by``) is a row of its own."""
+    """The row a run belongs to: its algorithm, then the in-process trainer's hyper-parameters
+    that differ from the shipped ones, the scenario overrides it trained with (``hyperparams.env``,
+    as dotted keys) and the model it started from (``init``), so that runs differing only in
+    their seed share a row; a run's best validation policy (``RUN/best``, with ``selected_by``)
+    is a row of its own."""
     label = record["algorithm"]
-    env = (record.get("hyperparams") or {}).get("env") or {}
-    settings = [f"{key}={value}" for key, value in _dotted(env)]
+    hyperparams = record.get("hyperparams") or {}
+    settings = _changed_hyperparams(label, hyperparams)
+    settings += [f"{key}={value}" for key, value in _dotted(hyperparams.get("env") or {})]
     if settings:
         label += f" ({', '.join(settings)})"
     if record.get("init"):
@@ -79,6 +84,19 @@ def configuration_label(record: dict[str, Any]) -> str:
     if record.get("selected_by"):
         label += ", best validation"
     return label
+
+
+def _changed_hyperparams(algorithm: str, hyperparams: dict[str, Any]) -> list[str]:
+    """``key=value`` of each setting of an in-process run that differs from the shipped
+    ``baselines/hyperparams/onpolicy.yml``, but the torch threads (``env`` is labelled apart)."""
+    if algorithm not in ONPOLICY_ALGOS:
+        return []
+    shipped = load_config(algorithm).as_dict()
+    return [
+        f"{key}={value}"
+        for key, value in hyperparams.items()
+        if key in shipped and key not in (*_NOT_LEARNING, "env") and value != shipped[key]
+    ]
 
 
 def _dotted(mapping: dict[str, Any], prefix: str = "") -> list[tuple[str, Any]]:

@@ -434,6 +434,11 @@ def test_results_rows_are_configurations_not_seeds():
         "ppo (episode.train.separation=0.3, episode.train.route=0) from random_fields_dagger_m0"
     )
     assert configuration_label({"algorithm": "mappo"}) == "mappo"  # other recipes' configs
+    shipped = load_config("ppo").as_dict()
+    tuned = {"algorithm": "ppo", "hyperparams": {**shipped, "ent_coef": 0.01, "threads": 2}}
+    assert configuration_label(tuned) == "ppo (ent_coef=0.01)"  # threads do not change a run
+    sb3 = {"algorithm": "sac", "hyperparams": {"ent_coef": "auto"}}
+    assert configuration_label(sb3) == "sac"  # only the in-process trainer's settings
     best = {**plain, "selected_by": {"eval_completed": 20}}
     assert configuration_label(best) == "ppo, best validation"
 
