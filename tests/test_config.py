@@ -302,6 +302,11 @@ INVALID: list[tuple[str, dict[str, Any], str]] = [
         r"initial\.position_(low|high)'",
     ),
     ("unknown collision mode", {"collision": {"mode": "explode"}}, r"collision\.mode'.*explode"),
+    (
+        "negative obstacle distance",
+        {"collision": {"obstacle_distance": -1.0}},
+        r"collision\.obstacle_distance'",
+    ),
     ("unknown disturbance model", {"disturbance": {"model": "dryden"}}, r"disturbance\.model'"),
     ("wind with 2 components", {"disturbance": {"wind": [0.0, 1.0]}}, r"disturbance\.wind'"),
     ("string for a number", {"dynamics": {"dt": "0.2"}}, r"dynamics\.dt'.*number"),

@@ -427,6 +427,26 @@ def test_terminate_mode_driven_collision_ends_episode():
     pytest.fail("no collision happened")
 
 
+@pytest.mark.parametrize("fast", [True, False])
+def test_a_uav_within_the_obstacle_distance_of_a_surface_collides(fast: bool) -> None:
+    """UAV 0 held 1.0 m outside O1's surface: a collision from collision.obstacle_distance 1.5 m,
+    none at the paper's 0 (inside only), on the kernels' path and the batched one."""
+    flags = []
+    for distance in (0.0, 1.5):
+        e = parallel_env("paper", collision__obstacle_distance=distance)
+        e.reset(seed=0)
+        if not fast:
+            e.sim.fast_path = None
+        obstacle = e.scenario.avoidance.obstacles[0]
+        e.sim.z[0, 0, :2] = (obstacle.center[0] + obstacle.radius + 1.0, obstacle.center[1])
+        e.sim.z[0, 0, 3:] = 0.0  # at rest: still 1.0 m out after the step
+        zero = {a: np.zeros(3, dtype=np.float32) for a in e.agents}
+        infos = e.step(zero)[4]
+        flags.append(infos["uav_0"]["collision"])
+        assert not infos["uav_1"]["collision"]
+    assert flags == [False, True]
+
+
 # ---------------------------------------------------------------------------- truncation
 def test_truncation_at_duration_then_step_raises():
     e = parallel_env(scenario=make_scenario(duration=2.0))

@@ -97,6 +97,7 @@ def test_paper_episode_is_the_batched_one_bit_for_bit() -> None:
         ("paper", {"observation__kind": "local", "observation__sensing_radius": 60.0}),
         ("paper", {"avoidance__rearm": True, "avoidance__reference_speed": "current"}),
         ("paper", {"disturbance__model": "none"}),
+        ("paper", {"collision__obstacle_distance": 12.0}),
         (windy_scenario(), {}),
     ],
 )

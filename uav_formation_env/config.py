@@ -550,11 +550,13 @@ class CollisionConfig:
     """What counts as a collision and what it does (the env reports it either way)."""
 
     uav_distance: float = 2.0  # two UAVs closer than this collide [m]
+    obstacle_distance: float = 0.0  # a UAV closer than this to an obstacle's surface collides [m]
     mode: str = "none"  # "none" (report only), "penalty" (reward -= penalty), "terminate"
     penalty: float = 1000.0  # cost added on a collision step in "penalty" mode [-]
 
     def __post_init__(self) -> None:
         _non_negative(self.uav_distance, "collision.uav_distance")
+        _non_negative(self.obstacle_distance, "collision.obstacle_distance")
         _require(
             self.mode in ("none", "penalty", "terminate"),
             "collision.mode",

@@ -166,7 +166,7 @@ def _finish(
     stage cost's terms, the estimate and the full observation.
 
     weights = (q, r, n, s, d_s, o, c_o); par = (duration, sign of the offsets, uav distance,
-    sensing radius (inf: none), observer on, estimate without s0).
+    sensing radius (inf: none), observer on, estimate without s0, obstacle distance).
     """
     batch, n_uav = z.shape[0], z.shape[1]
     n_obs = radii.shape[0]
@@ -174,7 +174,7 @@ def _finish(
         weights[0], weights[1], weights[2], weights[3], weights[4], weights[5], weights[6]
     )  # fmt: skip
     duration, sign, uav_distance, radius = par[0], par[1], par[2], par[3]
-    observer_on, without_s0 = par[4] != 0.0, par[5] != 0.0
+    observer_on, without_s0, obstacle_distance = par[4] != 0.0, par[5] != 0.0, par[6]
     a = np.empty((n_uav, 6))
     centred = np.empty((n_uav, 6))
     mean = np.empty(6)
@@ -255,7 +255,7 @@ def _finish(
             if o_w > 0.0:
                 g = max(c_o - surface[b, i], 0.0)
                 obstacle[b, i] = o_w * (g * g)
-            collision[b, i] = separation[b, i] < uav_distance or surface[b, i] < 0.0
+            collision[b, i] = separation[b, i] < uav_distance or surface[b, i] < obstacle_distance
             for k in range(3):
                 est = 0.0
                 if observer_on:

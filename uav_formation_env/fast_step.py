@@ -110,7 +110,7 @@ class FastStep:
         self._finish_par = np.array([
             cfg.duration, 1.0,  # sim.offsets are the slots (FormationConfig.slot_offsets)
             cfg.collision.uav_distance, math.inf if radius is None else radius,
-            obs_cfg.enabled, obs_cfg.estimate_without_s0,
+            obs_cfg.enabled, obs_cfg.estimate_without_s0, cfg.collision.obstacle_distance,
         ], dtype=float)  # fmt: skip
         self._layout = (*_layout(n_uav)[:3], np.ascontiguousarray(others_index(n_uav)))
         self._full_observation = cfg.observation.kind == "full"

@@ -190,7 +190,9 @@ def measure_state(
         pair_distance=pair,
         obstacle_surface=obstacle_distance,
     )
-    collision = (separation < cfg.collision.uav_distance) | (obstacle_distance < 0.0)
+    collision = (separation < cfg.collision.uav_distance) | (
+        obstacle_distance < cfg.collision.obstacle_distance
+    )
     if cfg.observer.enabled:
         estimate = disturbance_estimate(observer, cfg.observer)
     else:
