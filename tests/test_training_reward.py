@@ -153,6 +153,8 @@ def test_evaluation_scenario_keeps_the_observation_and_the_papers_rules():
     assert evaluation.episode.reward == "train" and evaluation.episode.action == "acceleration"
     assert evaluation.episode.corridor_width == 0.0
     assert evaluation.collision.mode == "none"
+    margin = training_scenario("paper", collision__obstacle_distance=2.0)
+    assert evaluation_scenario(margin).collision.obstacle_distance == 0.0  # the paper's: inside
 
 
 def test_reward_train_through_every_view():

@@ -37,12 +37,14 @@ def training_scenario(
 
 def evaluation_scenario(scenario: Scenario) -> Scenario:
     """``scenario`` as every evaluation flies it: acceleration actions, no corridor, collisions
-    reported without ending the episode, the observation and the world kept. The reward stays
-    the training reward if it is one (unterminated, it scores any policy, the references
-    included, on the same scale), else -J_i. J_i is recorded either way. A policy trained in the
-    velocity mode flies it through
+    reported without ending the episode (an obstacle collision is a UAV inside it, whatever
+    margin ``collision.obstacle_distance`` trained with), the observation and the world kept.
+    The reward stays the training reward if it is one (unterminated, it scores any policy, the
+    references included, on the same scale), else -J_i. J_i is recorded either way. A policy
+    trained in the velocity mode flies it through
     :class:`~uav_formation_env.policies.action_modes.VelocitySetpointPolicy`."""
     episode = EpisodeConfig()
     if scenario.episode.reward == "train":
         episode = EpisodeConfig(reward="train", train=scenario.episode.train)
-    return replace(scenario, episode=episode, collision=replace(scenario.collision, mode="none"))
+    collision = replace(scenario.collision, mode="none", obstacle_distance=0.0)
+    return replace(scenario, episode=episode, collision=collision)
